@@ -1,0 +1,44 @@
+"""Run every benchmark module (``make bench``)."""
+
+from __future__ import annotations
+
+import importlib
+import os
+import pkgutil
+import platform
+import time
+from pathlib import Path
+
+import torch
+
+
+def machine() -> str:
+    cpu = platform.processor() or platform.machine()
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    return f"{cpu}, {os.cpu_count()} cores, Python {platform.python_version()}, torch {torch.__version__}"
+
+
+def main() -> None:
+    only = {s.strip() for s in os.environ.get("BENCH_ONLY", "").split(",") if s.strip()}
+    print(f"# torchratslam benchmarks\nmachine: {machine()}\n")
+    here = Path(__file__).resolve().parent
+    for info in sorted(pkgutil.iter_modules([str(here)]), key=lambda m: m.name):
+        if not info.name.startswith("bench_"):
+            continue
+        if only and info.name.removeprefix("bench_") not in only:
+            continue
+        module = importlib.import_module(f"benchmarks.{info.name}")
+        t0 = time.perf_counter()
+        print(f"## {info.name.removeprefix('bench_')}\n", flush=True)
+        module.main()
+        print(f"\n({info.name}: {time.perf_counter() - t0:.1f} s)\n", flush=True)
+
+
+if __name__ == "__main__":
+    main()

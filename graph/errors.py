@@ -1,0 +1,47 @@
+"""The project's exception hierarchy.
+
+Every error the library raises on purpose derives from :class:`RatSLAMError`, so a
+caller (the CLI in particular) can catch one root class and print a one-line message.
+The root lives in ``graph`` because ``graph`` is the bottom layer: ``torchratslam``
+imports it, never the other way round.
+"""
+
+from __future__ import annotations
+
+import difflib
+from collections.abc import Iterable
+
+
+class RatSLAMError(Exception):
+    """Root of every error raised deliberately by graph and torchratslam."""
+
+
+class ConfigError(RatSLAMError, ValueError):
+    """A parameter is unknown, of the wrong type, or out of range."""
+
+
+class InputError(RatSLAMError, ValueError):
+    """Input data (images, odometry, files) is missing, malformed or inconsistent."""
+
+
+class MapFormatError(RatSLAMError, ValueError):
+    """A saved map or pose-graph file is corrupt, truncated, of an unknown version,
+    or incompatible with the configuration it is used with."""
+
+
+class GraphError(RatSLAMError):
+    """The experience graph or a pose-graph backend cannot do what was asked."""
+
+
+def nearest(name: str, candidates: Iterable[str]) -> str | None:
+    """Return the candidate closest to ``name`` (for 'did you mean' hints), or None."""
+    matches = difflib.get_close_matches(name, list(candidates), n=1, cutoff=0.5)
+    return matches[0] if matches else None
+
+
+def unknown_name_message(kind: str, name: str, candidates: Iterable[str]) -> str:
+    """One-line message for an unknown key or registry name, with the nearest valid one."""
+    candidates = sorted(candidates)
+    guess = nearest(name, candidates)
+    hint = f"; did you mean {guess!r}?" if guess else ""
+    return f"unknown {kind} {name!r}{hint} (valid: {', '.join(candidates)})"

@@ -1,0 +1,129 @@
+"""Frozen, validated parameter dataclasses (torch-free base) and the experience-map
+parameters.
+
+Every module's parameters are a frozen dataclass deriving from :class:`Params`. Field
+names are exactly the OpenRatSLAM / xRatSLAM config keys (see
+``shared/reference/parameters.md``); defaults are OpenRatSLAM's. Range constraints are
+declared in field metadata (``ge``, ``gt``, ``le``, ``lt``, ``choices``) and checked on
+construction, so an invalid value can never reach a module.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import typing
+from dataclasses import dataclass, field
+from typing import Any, ClassVar
+
+from graph.errors import ConfigError, unknown_name_message
+
+
+def param(default: Any, doc: str = "", **constraints: Any) -> Any:
+    """A dataclass field with a default, a one-line description and range constraints."""
+    return field(default=default, metadata={"doc": doc, **constraints})
+
+
+def _coerce(key: str, value: Any, typ: type) -> Any:
+    bad = ConfigError(f"parameter {key!r}: expected {typ.__name__}, got {value!r}")
+    if typ is bool:
+        if isinstance(value, bool):
+            return value
+        if isinstance(value, (int, float)) and value in (0, 1):
+            return bool(value)
+        if isinstance(value, str) and value.strip().lower() in ("0", "1", "true", "false"):
+            return value.strip().lower() in ("1", "true")
+        raise bad
+    if typ is int:
+        if isinstance(value, bool):
+            raise bad
+        if isinstance(value, int):
+            return value
+        if isinstance(value, float) and value.is_integer():
+            return int(value)
+        if isinstance(value, str):
+            try:
+                f = float(value)
+            except ValueError:
+                raise bad from None
+            if f.is_integer():
+                return int(f)
+        raise bad
+    if typ is float:
+        if isinstance(value, bool):
+            raise bad
+        if isinstance(value, (int, float)):
+            out = float(value)
+        elif isinstance(value, str):
+            try:
+                out = float(value)
+            except ValueError:
+                raise bad from None
+        else:
+            raise bad
+        if math.isnan(out):
+            raise ConfigError(f"parameter {key!r}: value is NaN")
+        return out
+    if typ is str:
+        if isinstance(value, str):
+            return value
+        raise bad
+    return value
+
+
+@dataclass(frozen=True)
+class Params:
+    """Base class: type coercion and range checks for every field on construction."""
+
+    section: ClassVar[str] = "params"
+
+    def __post_init__(self) -> None:
+        hints = typing.get_type_hints(type(self))
+        for f in dataclasses.fields(self):
+            value = _coerce(f.name, getattr(self, f.name), hints[f.name])
+            object.__setattr__(self, f.name, value)
+            m = f.metadata
+            checks = (
+                ("ge", lambda v, b: v >= b, ">="),
+                ("gt", lambda v, b: v > b, ">"),
+                ("le", lambda v, b: v <= b, "<="),
+                ("lt", lambda v, b: v < b, "<"),
+            )
+            for name, ok, sym in checks:
+                if name in m and not ok(value, m[name]):
+                    raise ConfigError(f"parameter {f.name!r} = {value!r} is out of range: must be {sym} {m[name]}")
+            if "choices" in m and value not in m["choices"]:
+                raise ConfigError(
+                    f"parameter {f.name!r} = {value!r} is not one of {', '.join(map(str, m['choices']))}"
+                )
+
+    @classmethod
+    def keys(cls) -> list[str]:
+        return [f.name for f in dataclasses.fields(cls)]
+
+    @classmethod
+    def from_dict(cls, values: dict[str, Any]) -> Params:
+        """Build from a mapping; unknown keys raise :class:`ConfigError` with a hint."""
+        known = set(cls.keys())
+        for key in values:
+            if key not in known:
+                raise ConfigError(unknown_name_message(f"{cls.section} parameter", key, known))
+        return cls(**values)
+
+    def to_dict(self) -> dict[str, Any]:
+        return dataclasses.asdict(self)
+
+    def replace(self, **changes: Any) -> Params:
+        return self.from_dict({**self.to_dict(), **changes})
+
+
+@dataclass(frozen=True)
+class ExperienceMapParams(Params):
+    """Experience-map parameters (OpenRatSLAM names and defaults)."""
+
+    section: ClassVar[str] = "experience map"
+
+    exp_correction: float = param(0.5, "alpha of the relaxation rule (Eq. 8)", gt=0.0, le=1.0)
+    exp_loops: int = param(10, "relaxation passes per step", ge=0)
+    exp_initial_em_deg: float = param(90.0, "initial heading of the map (degrees)")
+    exp_backend: str = param("alpha", "relaxation backend: alpha | gtsam | isam2")

@@ -1,0 +1,141 @@
+"""Config loading: shipped YAMLs, OpenRatSLAM .txt files, and clear errors."""
+
+from pathlib import Path
+
+import pytest
+
+from torchratslam.config import CONFIG_DIR, RatSLAMConfig, load_config
+from torchratslam.errors import ConfigError, InputError
+
+SHIPPED = sorted(CONFIG_DIR.glob("*.yaml"))
+
+
+def test_all_published_parameter_sets_are_shipped():
+    names = {p.stem for p in SHIPPED}
+    assert names >= {
+        "virtual_tour", "lab_tour", "irat", "new_college",
+        "irat_openratslam", "stlucia", "new_college_openratslam",
+    }
+
+
+@pytest.mark.parametrize("path", SHIPPED, ids=[p.stem for p in SHIPPED])
+def test_every_shipped_config_loads(path):
+    cfg = load_config(path)
+    assert isinstance(cfg, RatSLAMConfig)
+    assert cfg.pose_cells.pc_dim_xy > 0 and cfg.local_view.template_x_size > 0
+
+
+def test_published_values_reach_the_right_modules():
+    vt = load_config("virtual_tour")  # by name
+    assert (vt.pose_cells.pc_dim_xy, vt.pose_cells.pc_dim_th) == (80, 35)
+    assert (vt.local_view.template_x_size, vt.local_view.template_y_size) == (128, 32)
+    assert vt.local_view.vt_panoramic is False and vt.local_view.vt_step_match == 2
+    assert vt.experience_map.exp_loops == 250 and vt.experience_map.exp_initial_em_deg == 140.0
+    assert vt.visual_odometry.camera_fov_deg == 360.0
+    nc = load_config(CONFIG_DIR / "new_college_openratslam.yaml")
+    assert nc.local_view.vt_panoramic is True and nc.local_view.vt_patch_normalise == 2
+    # absent keys take OpenRatSLAM's defaults
+    assert nc.pose_cells.pc_w_e_dim == 7 and nc.pose_cells.pc_global_inhib == pytest.approx(2e-5)
+    assert nc.experience_map.exp_correction == 0.5
+
+
+def test_defaults_without_a_file_are_openratslams():
+    cfg = load_config()
+    assert cfg.pose_cells.pc_dim_xy == 21 and cfg.pose_cells.pc_dim_th == 36
+    assert (cfg.local_view.vt_shift_match, cfg.local_view.vt_step_match) == (25, 5)
+    assert cfg.experience_map.exp_loops == 10 and cfg.visual_odometry.vtrans_scaling == 100.0
+
+
+OPENRATSLAM_TXT = """\
+[general]
+topic_root=irat_red
+
+[ratslam]
+; a comment
+image_crop_y_max=150
+template_x_size=60
+template_y_size=20
+vt_shift_match=4
+vt_step_match=1
+vt_match_threshold=0.03
+pc_dim_xy=11   ; inline comment
+pc_cell_x_size=0.015
+exp_initial_em_deg=140
+vt_window_width=416
+
+[visual_odometry]
+camera_fov_deg=53
+
+[draw]
+enable=1
+exp_map_size=500
+
+[some_other_tool]
+whatever=1
+"""
+
+
+def test_openratslam_txt_config_loads(tmp_path: Path):
+    p = tmp_path / "config_irat.txt"
+    p.write_text(OPENRATSLAM_TXT)
+    cfg = load_config(p)
+    assert cfg.general.topic_root == "irat_red"
+    assert cfg.local_view.image_crop_y_max == 150 and cfg.local_view.template_x_size == 60
+    assert cfg.pose_cells.pc_dim_xy == 11 and cfg.pose_cells.pc_cell_x_size == pytest.approx(0.015)
+    assert cfg.visual_odometry.camera_fov_deg == 53.0
+    assert cfg.experience_map.exp_initial_em_deg == 140.0
+
+
+def test_txt_equals_yaml_for_the_same_values(tmp_path: Path):
+    p = tmp_path / "c.txt"
+    p.write_text("[ratslam]\n" + "\n".join(f"{k}={v}" for k, v in load_config("irat").to_flat().items()))
+    assert load_config(p) == load_config("irat")
+
+
+def test_unknown_key_names_key_and_nearest(tmp_path: Path):
+    p = tmp_path / "bad.yaml"
+    p.write_text("pc_dim_xz: 21\n")
+    with pytest.raises(ConfigError, match=r"'pc_dim_xz'.*did you mean 'pc_dim_xy'"):
+        load_config(p)
+    t = tmp_path / "bad.txt"
+    t.write_text("[ratslam]\nvt_match_treshold=0.1\n")
+    with pytest.raises(ConfigError, match=r"'vt_match_treshold'.*'vt_match_threshold'"):
+        load_config(t)
+
+
+@pytest.mark.parametrize(
+    ("key", "value", "pattern"),
+    [
+        ("pc_dim_xy", -3, r"'pc_dim_xy' = -3"),
+        ("pc_dim_th", 0, r"'pc_dim_th' = 0"),
+        ("template_x_size", "wide", r"'template_x_size'.*'wide'"),
+        ("pc_cell_x_size", float("nan"), r"'pc_cell_x_size'.*NaN"),
+        ("vt_panoramic", 2, r"'vt_panoramic'.*2"),
+        ("exp_correction", 1.5, r"'exp_correction' = 1.5"),
+        ("pc_dim_xy", 2.5, r"'pc_dim_xy'.*2.5"),
+    ],
+)
+def test_bad_values_are_named(key, value, pattern):
+    with pytest.raises(ConfigError, match=pattern):
+        load_config(**{key: value})
+
+
+def test_missing_file_is_a_clear_error(tmp_path: Path):
+    with pytest.raises(InputError, match="not found"):
+        load_config(tmp_path / "nope.yaml")
+
+
+def test_invalid_yaml_is_a_config_error(tmp_path: Path):
+    p = tmp_path / "x.yaml"
+    p.write_text("a: [1, 2\n")
+    with pytest.raises(ConfigError, match="not valid YAML"):
+        load_config(p)
+
+
+def test_configs_are_frozen_and_replace_validates():
+    cfg = load_config()
+    with pytest.raises(AttributeError):
+        cfg.pose_cells.pc_dim_xy = 5  # type: ignore[misc]
+    assert cfg.replace(pc_dim_xy=31).pose_cells.pc_dim_xy == 31
+    with pytest.raises(ConfigError):
+        cfg.replace(pc_dim_xy=0)

@@ -1,0 +1,21 @@
+"""torchratslam: RatSLAM in PyTorch.
+
+The torch front end (local view, pose cells, pipeline, readers, simulator, evaluation,
+plots, CLI). The experience map and pose-graph backends live in the torch-free
+``graph`` package.
+"""
+
+from torchratslam.config import RatSLAMConfig, load_config
+from torchratslam.errors import ConfigError, InputError, MapFormatError, RatSLAMError
+
+__version__ = "0.1.0"
+
+__all__ = [
+    "ConfigError",
+    "InputError",
+    "MapFormatError",
+    "RatSLAMConfig",
+    "RatSLAMError",
+    "__version__",
+    "load_config",
+]

@@ -1,0 +1,5 @@
+import sys
+
+from torchratslam.cli import main
+
+sys.exit(main())

@@ -1,0 +1,244 @@
+"""Parameters: one frozen dataclass per module, loaded from YAML or OpenRatSLAM ``.txt``.
+
+Keys are named exactly as in OpenRatSLAM (``shared/reference/parameters.md``); a key
+that is absent takes OpenRatSLAM's default. The key space is flat, as in OpenRatSLAM's
+own config files: :func:`load_config` routes each key to the module that owns it.
+
+Example:
+    >>> from torchratslam.config import load_config
+    >>> cfg = load_config("configs/virtual_tour.yaml")
+    >>> cfg.pose_cells.pc_dim_xy
+    80
+"""
+
+from __future__ import annotations
+
+import configparser
+import dataclasses
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, ClassVar
+
+import yaml
+
+from graph.errors import ConfigError, InputError, unknown_name_message
+from graph.params import ExperienceMapParams, Params, param
+
+CONFIG_DIR = Path(__file__).resolve().parent.parent / "configs"
+
+__all__ = [
+    "CONFIG_DIR",
+    "ExperienceMapParams",
+    "GeneralParams",
+    "LocalViewParams",
+    "Params",
+    "PoseCellParams",
+    "RatSLAMConfig",
+    "VisualOdometryParams",
+    "load_config",
+    "param",
+]
+
+
+@dataclass(frozen=True)
+class GeneralParams(Params):
+    """General keys of an OpenRatSLAM config (``[general]`` section)."""
+
+    section: ClassVar[str] = "general"
+
+    topic_root: str = param("", "ROS topic prefix: images at <root>/camera/image, odometry at <root>/odom")
+
+
+@dataclass(frozen=True)
+class PoseCellParams(Params):
+    """Pose-cell network parameters (OpenRatSLAM names and defaults)."""
+
+    section: ClassVar[str] = "pose cell"
+
+    pc_dim_xy: int = param(21, "cells along x and y", gt=0)
+    pc_dim_th: int = param(36, "cells along theta", gt=0)
+    pc_w_e_dim: int = param(7, "excitatory kernel side (cells)", gt=0)
+    pc_w_e_var: float = param(1.0, "excitatory kernel variance", gt=0.0)
+    pc_w_i_dim: int = param(5, "inhibitory kernel side (cells)", gt=0)
+    pc_w_i_var: float = param(2.0, "inhibitory kernel variance", gt=0.0)
+    pc_global_inhib: float = param(0.00002, "global inhibition subtracted from every cell", ge=0.0)
+    pc_cells_to_avg: int = param(3, "half-width of the cube decoded around the peak", ge=0)
+    vt_active_decay: float = param(1.0, "decay added when the current template is re-seen", ge=0.0)
+    pc_vt_inject_energy: float = param(0.15, "energy injected by a familiar template", ge=0.0)
+    pc_cell_x_size: float = param(1.0, "metres per pose cell in x and y", gt=0.0)
+    exp_delta_pc_threshold: float = param(2.0, "pose-cell distance that makes a new experience", ge=0.0)
+    pc_vt_restore: float = param(0.05, "decay relaxation per step", ge=0.0)
+
+
+@dataclass(frozen=True)
+class LocalViewParams(Params):
+    """Local view cell (visual template) parameters."""
+
+    section: ClassVar[str] = "local view"
+
+    vt_min_patch_normalisation_std: float = param(0.0, "minimum std in patch normalisation", ge=0.0)
+    vt_patch_normalise: int = param(0, "patch normalisation radius in pixels (0: off)", ge=0)
+    vt_normalisation: float = param(0.0, "global normalisation target mean (0: off)", ge=0.0)
+    vt_shift_match: int = param(25, "max column shift in normal mode", ge=0)
+    vt_step_match: int = param(5, "column step between compared offsets", gt=0)
+    vt_panoramic: bool = param(False, "images are 360-degree panoramas (circular matching)")
+    vt_match_threshold: float = param(0.03, "MAD above which a new template is learnt", ge=0.0)
+    template_x_size: int = param(1, "template width (columns)", gt=0)
+    template_y_size: int = param(1, "template height (rows)", gt=0)
+    image_crop_x_min: int = param(0, "crop: first column", ge=0)
+    image_crop_x_max: int = param(-1, "crop: end column (exclusive; -1: image width)", ge=-1)
+    image_crop_y_min: int = param(0, "crop: first row", ge=0)
+    image_crop_y_max: int = param(-1, "crop: end row (exclusive; -1: image height)", ge=-1)
+
+
+@dataclass(frozen=True)
+class VisualOdometryParams(Params):
+    """Visual odometry from intensity profiles (OpenRatSLAM names; -1 means image edge)."""
+
+    section: ClassVar[str] = "visual odometry"
+
+    vtrans_image_x_min: int = param(0, "translation crop: first column", ge=0)
+    vtrans_image_x_max: int = param(-1, "translation crop: end column (-1: width)", ge=-1)
+    vtrans_image_y_min: int = param(0, "translation crop: first row", ge=0)
+    vtrans_image_y_max: int = param(-1, "translation crop: end row (-1: height)", ge=-1)
+    vrot_image_x_min: int = param(0, "rotation crop: first column", ge=0)
+    vrot_image_x_max: int = param(-1, "rotation crop: end column (-1: width)", ge=-1)
+    vrot_image_y_min: int = param(0, "rotation crop: first row", ge=0)
+    vrot_image_y_max: int = param(-1, "rotation crop: end row (-1: height)", ge=-1)
+    camera_fov_deg: float = param(50.0, "horizontal field of view (degrees)", gt=0.0, le=360.0)
+    camera_hz: float = param(10.0, "frame rate (Hz)", gt=0.0)
+    vtrans_scaling: float = param(100.0, "profile difference to metres scale", gt=0.0)
+    vtrans_max: float = param(20.0, "cap on the translational speed estimate", ge=0.0)
+
+
+# Keys that only drive OpenRatSLAM's on-screen drawing; accepted and ignored anywhere.
+DISPLAY_KEYS = frozenset(
+    {"enable", "vt_window_width", "vt_window_height", "exp_map_size", "posecell_vis",
+     "media_path", "image_file", "pc_window_width", "pc_window_height"}
+)
+# Top-level YAML keys that are metadata, not parameters.
+META_KEYS = frozenset({"description", "source"})
+
+
+@dataclass(frozen=True)
+class RatSLAMConfig:
+    """All module parameters of one RatSLAM run.
+
+    Attributes map one-to-one to modules; build with :func:`load_config` or
+    :meth:`from_flat`.
+    """
+
+    general: GeneralParams = field(default_factory=GeneralParams)
+    pose_cells: PoseCellParams = field(default_factory=PoseCellParams)
+    local_view: LocalViewParams = field(default_factory=LocalViewParams)
+    experience_map: ExperienceMapParams = field(default_factory=ExperienceMapParams)
+    visual_odometry: VisualOdometryParams = field(default_factory=VisualOdometryParams)
+
+    @classmethod
+    def sections(cls) -> dict[str, type[Params]]:
+        hints = {f.name: f.default_factory for f in dataclasses.fields(cls)}
+        return hints  # type: ignore[return-value]
+
+    @classmethod
+    def key_owner(cls) -> dict[str, str]:
+        """Map every flat parameter key to the attribute (section) that owns it."""
+        owner: dict[str, str] = {}
+        for attr, klass in cls.sections().items():
+            for key in klass.keys():
+                owner[key] = attr
+        return owner
+
+    @classmethod
+    def from_flat(cls, values: Mapping[str, Any], *, source: str = "config") -> RatSLAMConfig:
+        """Build from a flat ``{key: value}`` mapping, routing keys to modules.
+
+        Raises:
+            ConfigError: an unknown key (named, with the nearest valid key), a wrong type
+                or an out-of-range value (named with the value).
+        """
+        owner = cls.key_owner()
+        grouped: dict[str, dict[str, Any]] = {attr: {} for attr in cls.sections()}
+        for key, value in values.items():
+            if key in META_KEYS or key in DISPLAY_KEYS:
+                continue
+            if key not in owner:
+                raise ConfigError(f"{source}: " + unknown_name_message("parameter", key, owner))
+            grouped[owner[key]][key] = value
+        try:
+            built = {attr: klass(**grouped[attr]) for attr, klass in cls.sections().items()}
+        except ConfigError as exc:
+            raise ConfigError(f"{source}: {exc}") from None
+        return cls(**built)
+
+    def to_flat(self) -> dict[str, Any]:
+        """The flat ``{key: value}`` form (what :meth:`from_flat` reads)."""
+        out: dict[str, Any] = {}
+        for attr in self.sections():
+            out.update(getattr(self, attr).to_dict())
+        return out
+
+    def replace(self, **changes: Any) -> RatSLAMConfig:
+        """A copy with some flat keys changed (validated like a loaded file)."""
+        return self.from_flat({**self.to_flat(), **changes}, source="replace()")
+
+
+def _read_yaml(path: Path) -> dict[str, Any]:
+    try:
+        data = yaml.safe_load(path.read_text())
+    except yaml.YAMLError as exc:
+        raise ConfigError(f"{path}: not valid YAML ({exc})") from None
+    if data is None:
+        return {}
+    if not isinstance(data, dict):
+        raise ConfigError(f"{path}: expected a mapping of parameter keys, got {type(data).__name__}")
+    return data
+
+
+def _read_openratslam_txt(path: Path) -> dict[str, Any]:
+    """Read an OpenRatSLAM ini-style config: ``[general]``, ``[ratslam]``,
+    ``[visual_odometry]``, ``[draw]``; ``;`` and ``#`` comments; other sections ignored."""
+    parser = configparser.ConfigParser(
+        inline_comment_prefixes=(";", "#"), comment_prefixes=(";", "#"), strict=False,
+        interpolation=None,
+    )
+    parser.optionxform = str  # keep key case
+    try:
+        parser.read_string(path.read_text())
+    except configparser.Error as exc:
+        raise ConfigError(f"{path}: not a valid OpenRatSLAM config ({exc})") from None
+    flat: dict[str, Any] = {}
+    for section in ("general", "ratslam", "visual_odometry"):
+        if parser.has_section(section):
+            for key, value in parser.items(section):
+                flat[key] = value.strip().strip('"')
+    return flat
+
+
+def load_config(path: str | Path | None = None, **overrides: Any) -> RatSLAMConfig:
+    """Load a configuration.
+
+    Args:
+        path: a YAML file (``.yaml``/``.yml``), an OpenRatSLAM ``.txt`` config, the name
+            of a file in ``configs/`` without extension (e.g. ``"virtual_tour"``), or
+            None for OpenRatSLAM's defaults.
+        **overrides: flat keys that replace values from the file.
+
+    Returns:
+        The validated :class:`RatSLAMConfig`.
+
+    Raises:
+        InputError: the file does not exist.
+        ConfigError: unknown key, wrong type or out-of-range value.
+    """
+    if path is None:
+        return RatSLAMConfig.from_flat(overrides, source="overrides")
+    p = Path(path)
+    if not p.exists() and not p.suffix and (CONFIG_DIR / f"{p.name}.yaml").exists():
+        p = CONFIG_DIR / f"{p.name}.yaml"
+    if not p.exists():
+        shipped = sorted(q.stem for q in CONFIG_DIR.glob("*.yaml"))
+        raise InputError(f"config file {str(path)!r} not found (shipped configs: {', '.join(shipped)})")
+    flat = _read_yaml(p) if p.suffix.lower() in (".yaml", ".yml") else _read_openratslam_txt(p)
+    flat.update(overrides)
+    return RatSLAMConfig.from_flat(flat, source=str(p))
