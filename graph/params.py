@@ -127,3 +127,22 @@ class ExperienceMapParams(Params):
     exp_loops: int = param(10, "relaxation passes per step", ge=0)
     exp_initial_em_deg: float = param(90.0, "initial heading of the map (degrees)")
     exp_backend: str = param("alpha", "relaxation backend: alpha | gtsam | isam2")
+    # Experience-map paper (Milford, Wyeth & Prasser 2005) features; defaults keep
+    # OpenRatSLAM's behaviour (no averaging, no link deletion).
+    exp_activity_zone_xy: float = param(
+        2.0, "r_a of Eq. 1: pose-cell (x', y') zone constant of experience activity (cells)", gt=0.0
+    )
+    exp_activity_zone_th: float = param(
+        2.0,
+        "theta_a of Eq. 2: pose-cell theta' zone constant of experience activity (cells)",
+        gt=0.0,
+    )
+    exp_link_averaging: bool = param(
+        False, "average repeated transitions into the existing link (Eq. 6); off in OpenRatSLAM"
+    )
+    exp_link_confidence_threshold: float = param(
+        0.0,
+        "delete a link when its confidence (Eq. 9) drops below this; 0 never deletes (OpenRatSLAM)",
+        ge=0.0,
+        le=1.0,
+    )

@@ -1,0 +1,306 @@
+"""The RatSLAM relaxation rule ("alpha rule", Eq. 8 of the multisession paper).
+
+For every link ``f -> t`` with measurement ``(dx, dy, dth)`` (``d``, ``heading``,
+``facing`` in RatSLAM terms) and correction ``c`` (``exp_correction``):
+
+    lx, ly = (x_f, y_f) + R(th_f) (dx, dy)       # where the link puts t
+    ex, ey = (x_t, y_t) - (lx, ly)
+    x_f += c ex;  y_f += c ey;  x_t -= c ex;  y_t -= c ey
+    df = signed_delta(th_f + dth, th_t)
+    th_f = wrap(th_f + c df);  th_t = wrap(th_t - c df)
+
+Two implementations:
+
+- :class:`AlphaReferenceBackend` ("alpha_reference"): OpenRatSLAM's order, a plain
+  Python loop over nodes in row order and their outgoing links in insertion order,
+  updating poses in place (Gauss-Seidel). Slow; the reference for tests.
+- :class:`AlphaBackend` ("alpha"): the same rule, vectorised. Updating every link at
+  once from the same old poses (Jacobi, scatter-add) DIVERGES for ``c = 0.5``, because
+  a node with k links receives k full corrections. Instead the links are coloured
+  greedily (in reference order) so that no two links of one colour share a node; the
+  colour classes are then applied one after another, each as a handful of numpy array
+  operations. Inside a class the updates touch disjoint nodes, so applying them at once
+  is exactly applying them one by one: every pass is a true Gauss-Seidel sweep, only in
+  a different link order than the reference. Its fixed point agrees with the
+  reference's to within a fraction of a percent in graph error (tests: w100, 1.077).
+  The colouring is cached and extended incrementally when links are appended (the
+  RatSLAM online case); any other change of the edge list recolours from scratch.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from graph.errors import ConfigError
+from graph.posegraph import TWO_PI, PoseGraph
+
+
+def _check(passes: int, correction: float) -> None:
+    if not isinstance(passes, (int, np.integer)) or passes < 0:
+        raise ConfigError(f"passes must be a non-negative integer, got {passes!r}")
+    if not 0.0 < correction <= 1.0:
+        raise ConfigError(f"correction (exp_correction) must be in (0, 1], got {correction!r}")
+
+
+def _wrap(a: float) -> float:
+    return (a + math.pi) % TWO_PI - math.pi
+
+
+def reference_order(edges: np.ndarray) -> np.ndarray:
+    """Link order of OpenRatSLAM: by source row, then insertion order.
+
+    Shape:
+        edges: (E, 2). Returns (E,) int64 indices into ``edges``.
+    """
+    return np.argsort(edges[:, 0], kind="stable")
+
+
+class AlphaReferenceBackend:
+    """Reference-order alpha rule: a plain Python loop (slow, for tests and checks)."""
+
+    name = "alpha_reference"
+    incremental = False
+
+    def relax(self, pg: PoseGraph, *, passes: int, correction: float = 0.5) -> np.ndarray:
+        """Run ``passes`` in-place passes of the alpha rule in OpenRatSLAM's order.
+
+        Returns:
+            (N, 3) float64 relaxed poses (``pg`` is not modified).
+        """
+        _check(passes, correction)
+        x, y, th = (pg.poses[:, k].tolist() for k in range(3))
+        order = reference_order(pg.edges)
+        links = [
+            (f, t, math.hypot(mx, my), math.atan2(my, mx), mth)
+            for (f, t), (mx, my, mth) in zip(
+                pg.edges[order].tolist(), pg.measurements[order].tolist()
+            )
+        ]
+        c = float(correction)
+        for _ in range(passes):
+            for f, t, d, heading, facing in links:
+                lx = x[f] + d * math.cos(th[f] + heading)
+                ly = y[f] + d * math.sin(th[f] + heading)
+                ex, ey = x[t] - lx, y[t] - ly
+                x[f] += ex * c
+                y[f] += ey * c
+                x[t] -= ex * c
+                y[t] -= ey * c
+                df = _wrap(th[t] - (th[f] + facing))
+                th[f] = _wrap(th[f] + df * c)
+                th[t] = _wrap(th[t] - df * c)
+        return np.stack([np.array(x), np.array(y), np.array(th)], axis=1)
+
+    def reset(self) -> None:
+        """Nothing to forget (stateless)."""
+
+
+def dependency_levels(edges: np.ndarray) -> np.ndarray:
+    """Level schedule of the reference order: an edge's level is one more than the
+    highest level of the earlier (reference-order) edges that share a node with it.
+
+    Applying the levels one after another, each level at once, is exactly the
+    reference Gauss-Seidel sweep (edges of one level touch disjoint nodes and depend
+    only on lower levels). Chains of links make the number of levels close to the
+    number of links, so this schedule is exact but only fast on bushy graphs.
+
+    Shape:
+        edges: (E, 2). Returns (E,) int64 levels.
+    """
+    last: dict[int, int] = {}
+    level = np.empty(len(edges), np.int64)
+    order = reference_order(edges)
+    for i, (f, t) in zip(order.tolist(), edges[order].tolist()):
+        lv = max(last.get(f, -1), last.get(t, -1)) + 1
+        level[i] = lv
+        last[f] = lv
+        last[t] = lv
+    return level
+
+
+class EdgeColouring:
+    """Greedy colouring of edges into matchings, extended incrementally.
+
+    Edges are coloured in reference order (by source row, then insertion) with the
+    smallest colour unused at both endpoints, so a node's colours are distinct and a
+    colour class is a matching. At most ``2 * max_degree - 1`` colours. Appended edges
+    are coloured in their insertion order.
+    """
+
+    def __init__(self) -> None:
+        self.edges = np.zeros((0, 2), np.int64)
+        self.colour = np.zeros(0, np.int64)
+        self._used: dict[int, int] = {}  # node -> bitmask of colours at that node
+
+    def _colour_new(self, new: np.ndarray) -> np.ndarray:
+        used = self._used
+        out = np.empty(len(new), np.int64)
+        for i, (f, t) in enumerate(new.tolist()):
+            uf, ut = used.get(f, 0), used.get(t, 0)
+            mask = uf | ut
+            free = ~mask & (mask + 1)  # lowest zero bit
+            used[f] = uf | free
+            used[t] = ut | free
+            out[i] = free.bit_length() - 1
+        return out
+
+    def update(self, edges: np.ndarray) -> bool:
+        """Colour ``edges``; reuse the old colouring if they extend the old list.
+
+        Returns:
+            True if the cached colouring was kept (possibly extended), False if rebuilt.
+        """
+        old = len(self.edges)
+        if old and len(edges) >= old and np.array_equal(edges[:old], self.edges):
+            if len(edges) > old:
+                self.colour = np.concatenate([self.colour, self._colour_new(edges[old:])])
+                self.edges = edges.copy()
+            return True
+        self._used = {}
+        self.edges = edges.copy()
+        order = reference_order(edges)
+        colour = np.empty(len(edges), np.int64)
+        colour[order] = self._colour_new(edges[order])
+        self.colour = colour
+        return False
+
+    @property
+    def num_colours(self) -> int:
+        return int(self.colour.max()) + 1 if len(self.colour) else 0
+
+
+SCHEDULES = ("colour", "reference")
+
+
+class AlphaBackend:
+    """Vectorised alpha rule: matchings of links applied one after another.
+
+    Args:
+        schedule: "colour" (default, fast): greedy edge colouring, about
+            ``2 * max_degree`` numpy steps per pass; a Gauss-Seidel sweep in colour
+            order, whose fixed point differs slightly from the reference order's (the
+            alpha rule with ``c = 0.5`` is a Kaczmarz sweep, and the limit of an
+            inconsistent Kaczmarz sweep depends on the order). "reference": the
+            dependency-level schedule, which reproduces ``alpha_reference`` exactly (to
+            rounding) but needs about one numpy step per link on chain-like graphs.
+    """
+
+    name = "alpha"
+    incremental = True
+
+    def __init__(self, schedule: str = "colour") -> None:
+        if schedule not in SCHEDULES:
+            raise ConfigError(
+                f"unknown alpha schedule {schedule!r} (valid: {', '.join(SCHEDULES)})"
+            )
+        self.schedule = schedule
+        self._colouring = EdgeColouring()
+        self._level_edges: np.ndarray | None = None
+        self._group = np.zeros(0, np.int64)
+        self._plan_key: tuple[int, int] | None = None
+        self._perm = np.zeros(0, np.int64)
+        self._splits: list[int] = []
+
+    def reset(self) -> None:
+        """Forget the cached schedule."""
+        self.__init__(self.schedule)
+
+    @property
+    def num_classes(self) -> int:
+        """Number of sequential steps per pass in the current schedule."""
+        return len(self._splits)
+
+    def _plan(self, pg: PoseGraph) -> None:
+        if self.schedule == "colour":
+            kept = self._colouring.update(pg.edges)
+            group = self._colouring.colour
+        else:
+            kept = self._level_edges is not None and np.array_equal(self._level_edges, pg.edges)
+            if not kept:
+                self._level_edges = pg.edges.copy()
+                self._group = dependency_levels(pg.edges)
+            group = self._group
+        key = (len(pg.edges), int(group.max()) + 1 if len(group) else 0)
+        if kept and key == self._plan_key:
+            return
+        self._perm = np.lexsort((np.arange(len(group)), group))
+        self._splits = np.cumsum(np.bincount(group)).tolist() if len(group) else []
+        self._plan_key = key
+
+    def relax(self, pg: PoseGraph, *, passes: int, correction: float = 0.5) -> np.ndarray:
+        """Run ``passes`` Gauss-Seidel passes of the alpha rule, vectorised per class.
+
+        Returns:
+            (N, 3) float64 relaxed poses, angles in ``[-pi, pi)`` (``pg`` is not modified).
+        """
+        _check(passes, correction)
+        p = pg.poses.copy()
+        if passes == 0 or pg.num_edges == 0:
+            return p
+        self._plan(pg)
+        e = pg.edges[self._perm]
+        m = pg.measurements[self._perm]
+        mz = m[:, 0] + 1j * m[:, 1]
+        mth = m[:, 2] - math.pi  # folds the +pi of the angle wrap into the constant
+        classes = []
+        start = 0
+        for stop in self._splits:
+            sl = slice(start, stop)
+            classes.append((e[sl, 0].copy(), e[sl, 1].copy(), mz[sl], mth[sl]))
+            start = stop
+        z = p[:, 0] + 1j * p[:, 1]
+        if correction == 0.5:
+            return _relax_half(z, p[:, 2], classes, passes)
+        th = p[:, 2].copy()  # unwrapped inside the loop; only differences matter
+        c = float(correction)
+        pi, two_pi = math.pi, TWO_PI
+        exp, rint = np.exp, np.rint
+        for _ in range(passes):
+            for f, t, lz, lth in classes:
+                thf = th[f]
+                tht = th[t]
+                zf = z[f]
+                zt = z[t]
+                err = (zt - zf - exp(1j * thf) * lz) * c
+                z[f] = zf + err
+                z[t] = zt - err
+                raw = tht - thf - lth - pi
+                df = (raw - two_pi * rint(raw * (1.0 / two_pi))) * c
+                th[f] = thf + df
+                th[t] = tht - df
+        return np.stack([z.real, z.imag, np.remainder(th + pi, two_pi) - pi], axis=1)
+
+
+def _relax_half(z: np.ndarray, th: np.ndarray, classes: list, passes: int) -> np.ndarray:
+    """Alpha rule for c = 0.5 without transcendental functions.
+
+    Orientations are kept as unit complex numbers r = exp(i th). Half the wrapped angle
+    error of a link is the principal square root of q = r_t conj(r_f) exp(-i dth), and
+    for a unit q that root is (1 + q) / |1 + q| (the half-angle formula). So a link
+    costs a few complex multiplications and one absolute value.
+    """
+    r = np.exp(1j * th)
+    ms = [(f, t, lz, np.exp(-1j * (lth + math.pi))) for f, t, lz, lth in classes]
+    for _ in range(passes):
+        for f, t, lz, um in ms:
+            rf = r[f]
+            rt = r[t]
+            zf = z[f]
+            zt = z[t]
+            err = (zt - zf - rf * lz) * 0.5
+            z[f] = zf + err
+            z[t] = zt - err
+            h = rt * rf.conjugate()
+            h *= um
+            h += 1.0
+            a = np.abs(h)
+            if a.min() < 1e-12:  # error of exactly pi: wrap(pi) = -pi, a -pi/2 half-turn
+                h[a < 1e-12] = -1j
+                a[a < 1e-12] = 1.0
+            h /= a
+            r[f] = rf * h
+            r[t] = rt * h.conjugate()
+        r /= np.abs(r)  # keep |r| = 1 against rounding drift
+    return np.stack([z.real, z.imag, np.angle(r)], axis=1)

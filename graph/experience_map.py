@@ -1,0 +1,831 @@
+"""The RatSLAM experience map: a networkx graph with array views, relaxed by a backend.
+
+Behaviour follows OpenRatSLAM's ``ExperienceMap`` (``shared/reference/ratslam-algorithm.md``)
+plus the experience-map paper's features (``graph.features``):
+
+* odometry accumulates ``(x, y, facing, time)`` since the current experience, the facing
+  starting at ``exp_initial_em_deg``;
+* ``CREATE`` places a new experience at current pose + accumulated displacement and links
+  the current experience to it; ``LINK`` links the current experience to an existing one
+  (one link per pair, either direction) and makes it current; ``SET`` only makes it
+  current. A link stores ``(d, heading, facing)`` relative to its source's orientation
+  and the elapsed time;
+* :meth:`ExperienceMap.iterate` runs ``exp_loops`` passes of the configured backend
+  (``exp_backend``) on :meth:`ExperienceMap.posegraph` and writes the poses back.
+
+Node poses, pose-cell coordinates, link endpoints and measurements live in preallocated
+numpy arrays (grown by doubling) kept in sync with the :class:`networkx.DiGraph`, so
+building the pose graph and relaxing never loops over links or nodes in Python; the
+graph's node poses are refreshed lazily when :attr:`ExperienceMap.graph` is read.
+
+Example:
+    >>> from graph.experience_map import ExperienceMap
+    >>> from graph.messages import Action, ActionKind
+    >>> from graph.params import ExperienceMapParams
+    >>> em = ExperienceMap(ExperienceMapParams(exp_initial_em_deg=0.0))
+    >>> em.apply(Action(ActionKind.CREATE, dest_id=0))
+    >>> em.on_odometry(1.0, 0.0, 2.0)
+    >>> em.apply(Action(ActionKind.CREATE, dest_id=1))
+    >>> em.poses[1].tolist()
+    [2.0, 0.0, 0.0]
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from typing import Any, Protocol
+
+import networkx as nx
+import numpy as np
+
+from graph.errors import GraphError, InputError, MapFormatError
+from graph.features import (
+    Route,
+    average_transition,
+    experience_activity,
+    invert_transition,
+    link_confidence,
+    peak_experience,
+    rotate_link_components,
+    signed_delta_rad,
+    temporal_map,
+    wrap_rad,
+)
+from graph.messages import Action, ActionKind
+from graph.params import ExperienceMapParams
+
+__all__ = ["ExperienceMap", "Route"]
+
+STATE_FORMAT = "graph.experience_map"
+STATE_VERSION = 1
+
+
+class RelaxationBackend(Protocol):
+    """What :meth:`ExperienceMap.iterate` needs from a backend (see ``graph.backends``)."""
+
+    def relax(self, pg: Any, *, passes: int, correction: float = 0.5) -> np.ndarray: ...
+
+
+def _grow(a: np.ndarray, need: int) -> np.ndarray:
+    """Return ``a`` with at least ``need`` rows (doubling), keeping its content."""
+    if need <= len(a):
+        return a
+    cap = max(need, 2 * len(a), 16)
+    out = np.zeros((cap, *a.shape[1:]), dtype=a.dtype)
+    out[: len(a)] = a
+    return out
+
+
+def _measurement_of(d: float, heading: float, facing: float) -> tuple[float, float, float]:
+    """A RatSLAM link ``(d, heading, facing)`` as a Pose2 between ``[dx, dy, dth]``."""
+    return d * math.cos(heading), d * math.sin(heading), facing
+
+
+class ExperienceMap:
+    """RatSLAM experience map (OpenRatSLAM behaviour + the experience-map paper's features).
+
+    Args:
+        params: experience-map parameters (default: OpenRatSLAM's).
+        backend: a relaxation backend object with ``relax(pg, *, passes, correction)``;
+            None builds ``graph.backends.make_backend(params.exp_backend)`` on first use.
+
+    Attributes:
+        params: the parameters.
+        current_id: the current experience (-1 before the first one).
+        prev_id: the previous current experience (-1 if none).
+        accum_x, accum_y, accum_facing, accum_time: odometry accumulated since the
+            current experience (m, m, rad, s).
+        relative_rad: relative view angle given with the last set-current.
+    """
+
+    _LINK_FIELDS = ("src", "dst", "link", "meas", "counts", "behaviour")
+
+    def __init__(
+        self,
+        params: ExperienceMapParams | None = None,
+        *,
+        backend: RelaxationBackend | None = None,
+    ) -> None:
+        self.params = params if params is not None else ExperienceMapParams()
+        self._backend = backend
+        self._clear()
+
+    # ------------------------------------------------------------------ storage
+    def _clear(self) -> None:
+        self._n = 0
+        self._e = 0
+        self._pose = np.zeros((0, 3))
+        self._pc = np.zeros((0, 3))
+        self._vt = np.zeros(0, dtype=np.int64)
+        self._frame = np.zeros(0, dtype=np.int64)
+        self._t = np.zeros(0)
+        self._src = np.zeros(0, dtype=np.int64)
+        self._dst = np.zeros(0, dtype=np.int64)
+        self._link = np.zeros((0, 4))  # d, heading, facing, dt
+        self._meas = np.zeros((0, 3))  # dx, dy, dth in the source's frame
+        self._counts = np.zeros((0, 3), dtype=np.int64)  # traversals, successes, trials
+        self._behaviour = np.zeros(0, dtype=np.int64)
+        self._eidx: dict[tuple[int, int], int] = {}
+        self._g = nx.DiGraph()
+        self._poses_dirty = False
+        self._order: np.ndarray | None = None
+        self.current_id = -1
+        self.prev_id = -1
+        self.accum_x = 0.0
+        self.accum_y = 0.0
+        self.accum_facing = math.radians(self.params.exp_initial_em_deg)
+        self.accum_time = 0.0
+        self.relative_rad = 0.0
+
+    def reset(self) -> None:
+        """Forget every experience and link; accumulators back to their initial values."""
+        self._clear()
+        self._reset_backend()
+
+    def _reset_backend(self) -> None:
+        reset = getattr(self._backend, "reset", None)
+        if callable(reset):
+            reset()
+
+    def __len__(self) -> int:
+        return self._n
+
+    @property
+    def num_links(self) -> int:
+        """Number of links."""
+        return self._e
+
+    @property
+    def poses(self) -> np.ndarray:
+        """Experience poses ``[x, y, th]`` (read-only view; row = experience id).
+
+        Shape:
+            (N, 3).
+        """
+        v = self._pose[: self._n].view()
+        v.flags.writeable = False
+        return v
+
+    @property
+    def graph(self) -> nx.DiGraph:
+        """The map as a :class:`networkx.DiGraph` (nodes: experiences; edges: links).
+
+        Node attributes: ``x, y, th, pc (x', y', th' cells), template_id, frame, t``.
+        Edge attributes: ``d, heading, facing, dt, traversals, successes, trials,
+        behaviour, confidence``. Treat it as read-only: change the map through the
+        methods so the arrays stay in sync.
+        """
+        if self._poses_dirty:
+            p = self._pose[: self._n].tolist()
+            nx.set_node_attributes(
+                self._g, {i: {"x": x, "y": y, "th": th} for i, (x, y, th) in enumerate(p)}
+            )
+            self._poses_dirty = False
+        return self._g
+
+    def _check_id(self, i: int, what: str) -> int:
+        i = int(i)
+        if not 0 <= i < self._n:
+            raise GraphError(
+                f"{what} experience {i} does not exist (the map has {self._n}); "
+                "the pose cells and the experience map are out of sync"
+            )
+        return i
+
+    # ------------------------------------------------------------- low level
+    def add_experience(
+        self,
+        x: float,
+        y: float,
+        th: float,
+        *,
+        pc: tuple[float, float, float] | np.ndarray = (0.0, 0.0, 0.0),
+        template_id: int = -1,
+        frame: int = -1,
+        t: float = 0.0,
+    ) -> int:
+        """Append an experience (no link, current experience unchanged).
+
+        Args:
+            x, y, th: map pose (m, m, rad; ``th`` is wrapped to ``(-pi, pi]``).
+            pc: pose-cell coordinates ``(x', y', th')`` (cells).
+            template_id: the visual template of the experience.
+            frame: frame index at creation.
+            t: timestamp at creation (s).
+
+        Returns:
+            The new experience id (= its row).
+        """
+        pose = np.array([x, y, wrap_rad(th)], dtype=np.float64)
+        pcv = np.asarray(pc, dtype=np.float64).reshape(-1)
+        if pcv.shape != (3,) or not (np.all(np.isfinite(pose)) and np.all(np.isfinite(pcv))):
+            raise InputError(
+                f"experience needs finite x, y, th and 3 pose-cell coordinates, got {pose}, {pcv}"
+            )
+        i = self._n
+        need = i + 1
+        self._pose = _grow(self._pose, need)
+        self._pc = _grow(self._pc, need)
+        self._vt = _grow(self._vt, need)
+        self._frame = _grow(self._frame, need)
+        self._t = _grow(self._t, need)
+        self._pose[i] = pose
+        self._pc[i] = pcv
+        self._vt[i] = int(template_id)
+        self._frame[i] = int(frame)
+        self._t[i] = float(t)
+        self._n = need
+        self._g.add_node(i, **self._node_attrs(i))
+        return i
+
+    def _node_attrs(self, i: int) -> dict[str, Any]:
+        x, y, th = self._pose[i].tolist()
+        return {
+            "x": x,
+            "y": y,
+            "th": th,
+            "pc": tuple(self._pc[i].tolist()),
+            "template_id": int(self._vt[i]),
+            "frame": int(self._frame[i]),
+            "t": float(self._t[i]),
+        }
+
+    def _edge_attrs(self, k: int) -> dict[str, Any]:
+        d, heading, facing, dt = self._link[k].tolist()
+        trav, succ, trials = self._counts[k].tolist()
+        return {
+            "d": d,
+            "heading": heading,
+            "facing": facing,
+            "dt": dt,
+            "traversals": trav,
+            "successes": succ,
+            "trials": trials,
+            "behaviour": int(self._behaviour[k]),
+            "confidence": float(link_confidence(succ, trials)),
+        }
+
+    def _set_link_values(self, k: int, d: float, heading: float, facing: float, dt: float) -> None:
+        self._link[k] = (d, heading, facing, dt)
+        self._meas[k] = _measurement_of(d, heading, facing)
+
+    def _sync_edge(self, k: int) -> None:
+        self._g.edges[int(self._src[k]), int(self._dst[k])].update(self._edge_attrs(k))
+
+    def link_index(self, a: int, b: int) -> int:
+        """Row of the link between ``a`` and ``b`` in either direction, or -1."""
+        k = self._eidx.get((int(a), int(b)))
+        if k is None:
+            k = self._eidx.get((int(b), int(a)), -1)
+        return k
+
+    def add_link(
+        self,
+        src: int,
+        dst: int,
+        d: float,
+        heading: float,
+        facing: float,
+        dt: float,
+        *,
+        behaviour: int = 0,
+        counts: tuple[int, int, int] = (1, 1, 1),
+    ) -> bool:
+        """Add a link ``src -> dst`` unless the pair is already linked (either direction).
+
+        Args:
+            src, dst: experience ids.
+            d: distance (m); heading, facing: relative to ``src``'s orientation (rad).
+            dt: elapsed time of the transition (s).
+            behaviour: movement behaviour label ``beta_ij`` of Eq. 9.
+            counts: initial ``(traversals, successes, trials)`` (Eq. 9's ``n_ij`` and
+                ``n_i,beta``).
+
+        Returns:
+            True if a link was added, False if the pair was already linked.
+        """
+        src = self._check_id(src, "link source")
+        dst = self._check_id(dst, "link target")
+        if src == dst:
+            raise GraphError(f"cannot link experience {src} to itself")
+        if self.link_index(src, dst) >= 0:
+            return False
+        vals = np.array([d, heading, facing, dt], dtype=np.float64)
+        if not np.all(np.isfinite(vals)) or d < 0:
+            raise InputError(
+                f"link needs finite d >= 0, heading, facing and dt, got {vals.tolist()}"
+            )
+        k = self._e
+        need = k + 1
+        for name in self._LINK_FIELDS:
+            setattr(self, f"_{name}", _grow(getattr(self, f"_{name}"), need))
+        self._src[k] = src
+        self._dst[k] = dst
+        self._set_link_values(
+            k, float(d), float(wrap_rad(heading)), float(wrap_rad(facing)), float(dt)
+        )
+        self._counts[k] = counts
+        self._behaviour[k] = int(behaviour)
+        self._e = need
+        self._eidx[(src, dst)] = k
+        self._g.add_edge(src, dst, **self._edge_attrs(k))
+        self._order = None
+        return True
+
+    def remove_link(self, src: int, dst: int) -> None:
+        """Delete the link ``src -> dst`` (exact direction); later links shift down one row."""
+        k = self._eidx.get((int(src), int(dst)))
+        if k is None:
+            raise GraphError(f"there is no link {src} -> {dst} to remove")
+        e = self._e
+        for name in self._LINK_FIELDS:
+            a = getattr(self, f"_{name}")
+            a[k : e - 1] = a[k + 1 : e]
+        self._e = e - 1
+        self._g.remove_edge(int(src), int(dst))
+        s, d = self._src[: self._e].tolist(), self._dst[: self._e].tolist()
+        self._eidx = {(a, b): i for i, (a, b) in enumerate(zip(s, d))}
+        self._order = None
+
+    # ------------------------------------------------------------- odometry
+    def on_odometry(self, vtrans: float, vrot: float, dt: float) -> None:
+        """Accumulate odometry since the current experience (OpenRatSLAM's ``on_odo``).
+
+        Args:
+            vtrans: forward speed (m/s).
+            vrot: turn rate (rad/s, counter-clockwise).
+            dt: interval (s).
+        """
+        step = vtrans * dt
+        self.accum_facing = wrap_rad(self.accum_facing + vrot * dt)
+        self.accum_x += step * math.cos(self.accum_facing)
+        self.accum_y += step * math.sin(self.accum_facing)
+        self.accum_time += dt
+
+    def _measurement(self, src: int, relative_rad: float) -> tuple[float, float, float]:
+        """The accumulated transition as a link of ``src``: ``(d, heading, facing)``."""
+        th = float(self._pose[src, 2])
+        d = math.hypot(self.accum_x, self.accum_y)
+        heading = signed_delta_rad(th, math.atan2(self.accum_y, self.accum_x))
+        facing = signed_delta_rad(th, wrap_rad(self.accum_facing + relative_rad))
+        return d, float(heading), float(facing)
+
+    # --------------------------------------------------------------- actions
+    def apply(
+        self,
+        action: Action,
+        *,
+        frame: int = -1,
+        t: float = 0.0,
+        pc: tuple[float, float, float] | np.ndarray = (0.0, 0.0, 0.0),
+        template_id: int = -1,
+        behaviour: int = 0,
+    ) -> None:
+        """Execute a pose-cell action (create / link / set), as OpenRatSLAM does.
+
+        Args:
+            action: the pose cells' decision.
+            frame, t: frame index and time, stored on a created experience.
+            pc: pose-cell coordinates of a created experience (cells).
+            template_id: template of a created experience.
+            behaviour: movement behaviour of the transition (Eq. 9); 0 when unused.
+        """
+        kind = ActionKind(action.kind)
+        if kind == ActionKind.NONE:
+            return
+        if kind == ActionKind.CREATE:
+            if action.dest_id not in (-1, self._n):
+                raise GraphError(
+                    f"CREATE asks for experience {action.dest_id} but the next id is {self._n}; "
+                    "the pose cells and the experience map are out of sync"
+                )
+            self.create_experience(
+                pc=pc, template_id=template_id, frame=frame, t=t, behaviour=behaviour
+            )
+        elif kind == ActionKind.LINK:
+            self.link_to(action.dest_id, action.relative_rad, behaviour=behaviour)
+        else:
+            self.set_current(action.dest_id, action.relative_rad, behaviour=behaviour)
+
+    def create_experience(
+        self,
+        *,
+        pc: tuple[float, float, float] | np.ndarray = (0.0, 0.0, 0.0),
+        template_id: int = -1,
+        frame: int = -1,
+        t: float = 0.0,
+        behaviour: int = 0,
+    ) -> int:
+        """``CREATE``: new experience at current pose + accumulated delta, linked, current.
+
+        The first experience sits at ``(0, 0, wrap(accum_facing))``. Later ones at
+        ``(x_cur + accum_x, y_cur + accum_y, wrap(accum_facing))`` with a link from the
+        current experience (measured from the accumulators, elapsed time reset).
+
+        Returns:
+            The new experience id.
+        """
+        cur = self.current_id
+        if cur < 0:
+            x, y = 0.0, 0.0
+        else:
+            x = float(self._pose[cur, 0]) + self.accum_x
+            y = float(self._pose[cur, 1]) + self.accum_y
+        new = self.add_experience(
+            x, y, wrap_rad(self.accum_facing), pc=pc, template_id=template_id, frame=frame, t=t
+        )
+        if cur >= 0:
+            self._transition(cur, new, behaviour)
+            self._link_from_accumulators(cur, new, 0.0, behaviour)
+        self.set_current(new, 0.0, behaviour=behaviour, _counted=True)
+        return new
+
+    def _link_from_accumulators(
+        self, src: int, dst: int, relative_rad: float, behaviour: int
+    ) -> bool:
+        d, heading, facing = self._measurement(src, relative_rad)
+        added = self.add_link(src, dst, d, heading, facing, self.accum_time, behaviour=behaviour)
+        if added:
+            self.accum_time = 0.0
+        return added
+
+    def link_to(self, dest: int, relative_rad: float = 0.0, *, behaviour: int = 0) -> bool:
+        """``LINK``: link current -> ``dest`` (unless the pair is linked) and make it current.
+
+        With ``exp_link_averaging`` a repeated transition is averaged into the existing
+        link (Eq. 6).
+
+        Returns:
+            True if a new link was made.
+        """
+        dest = self._check_id(dest, "LINK target")
+        cur = self.current_id
+        added = False
+        if cur >= 0 and cur != dest:
+            self._repeat_or_count(cur, dest, relative_rad, behaviour)
+            added = self._link_from_accumulators(cur, dest, relative_rad, behaviour)
+        self.set_current(dest, relative_rad, behaviour=behaviour, _counted=True)
+        return added
+
+    def set_current(
+        self, dest: int, relative_rad: float = 0.0, *, behaviour: int = 0, _counted: bool = False
+    ) -> None:
+        """``SET``: make ``dest`` current; accumulators restart from its pose.
+
+        Nothing happens when ``dest`` is already current. Otherwise ``accum_x = accum_y
+        = 0`` and ``accum_facing = wrap(th_dest + relative_rad)``; the elapsed time is
+        kept (OpenRatSLAM resets it only when a link is made).
+        """
+        dest = self._check_id(dest, "SET target")
+        if dest == self.current_id:
+            return
+        if not _counted and self.current_id >= 0:
+            self._repeat_or_count(self.current_id, dest, relative_rad, behaviour)
+        self.prev_id = self.current_id
+        self.current_id = dest
+        self.accum_x = 0.0
+        self.accum_y = 0.0
+        self.accum_facing = wrap_rad(float(self._pose[dest, 2]) + relative_rad)
+        self.relative_rad = float(relative_rad)
+
+    def _repeat_or_count(self, cur: int, dest: int, relative_rad: float, behaviour: int) -> None:
+        """Bookkeeping of a transition ``cur -> dest`` between existing experiences."""
+        k = self.link_index(cur, dest)
+        if k >= 0 and self.params.exp_link_averaging:
+            self._average_into(k, cur, relative_rad)
+        self._transition(cur, dest, behaviour)
+
+    def _average_into(self, k: int, cur: int, relative_rad: float) -> None:
+        """Average the accumulated transition into link ``k`` (Eq. 6)."""
+        d, heading, facing = self._measurement(cur, relative_rad)
+        meas = np.array([d * math.cos(heading), d * math.sin(heading), facing])
+        if int(self._src[k]) != cur:  # the link runs the other way: express it from its source
+            meas = invert_transition(meas)
+        new = average_transition(self._meas[k], meas)
+        dt = 0.5 * (float(self._link[k, 3]) + self.accum_time)
+        self._set_link_values(
+            k, math.hypot(new[0], new[1]), math.atan2(new[1], new[0]), float(new[2]), dt
+        )
+        self.accum_time = 0.0
+        self._sync_edge(k)
+
+    def _transition(self, src: int, dst: int, behaviour: int) -> None:
+        """Count a transition for Eq. 9 and delete links whose confidence fell too low.
+
+        Every link leaving ``src`` with the same behaviour had a trial; the one to
+        ``dst`` succeeded, the others failed. The link between the pair (either
+        direction) counts a traversal.
+        """
+        k_pair = self.link_index(src, dst)
+        out = [self._eidx[(src, v)] for v in self._g.successors(src)]
+        rows = np.array(out, dtype=np.int64)
+        rows = rows[self._behaviour[rows] == behaviour] if len(rows) else rows
+        self._counts[rows, 2] += 1
+        self._counts[rows[self._dst[rows] == dst], 1] += 1
+        if k_pair >= 0:
+            self._counts[k_pair, 0] += 1
+        touched = set(rows.tolist()) | ({k_pair} if k_pair >= 0 else set())
+        for k in touched:
+            self._sync_edge(k)
+        thr = self.params.exp_link_confidence_threshold
+        if thr > 0.0 and len(rows):
+            conf = link_confidence(self._counts[rows, 1], self._counts[rows, 2])
+            doomed = [(src, int(v)) for v in self._dst[rows[conf < thr]]]
+            for a, b in doomed:
+                self.remove_link(a, b)
+
+    # ------------------------------------------------------------ relaxation
+    def _reference_order(self) -> np.ndarray:
+        """OpenRatSLAM's relaxation order: by source experience, then link creation (cached)."""
+        if self._order is None or len(self._order) != self._e:
+            self._order = np.argsort(self._src[: self._e], kind="stable")
+        return self._order
+
+    def posegraph(self, order: str = "creation") -> Any:
+        """The map as a :class:`graph.posegraph.PoseGraph` (built from the arrays, no loops).
+
+        Args:
+            order: ``"creation"`` lists links as they were made: append-only, which
+                incremental backends (iSAM2, the cached colouring of "alpha") rely on;
+                the alpha backends sort by source themselves to visit links in
+                OpenRatSLAM's order. ``"reference"`` lists them in that order (by
+                source experience, then creation).
+        """
+        from graph.posegraph import PoseGraph
+
+        e = self._e
+        if order == "reference":
+            idx = self._reference_order()
+            edges = np.stack([self._src[:e][idx], self._dst[:e][idx]], axis=1)
+            meas = self._meas[:e][idx]
+        elif order == "creation":
+            edges = np.stack([self._src[:e], self._dst[:e]], axis=1)
+            meas = self._meas[:e]
+        else:
+            raise InputError(f"order must be 'reference' or 'creation', got {order!r}")
+        return PoseGraph(self._pose[: self._n], edges, meas, np.arange(self._n, dtype=np.int64))
+
+    @property
+    def backend(self) -> RelaxationBackend:
+        """The relaxation backend (built from ``exp_backend`` on first use)."""
+        if self._backend is None:
+            from graph.backends import make_backend
+
+            self._backend = make_backend(self.params.exp_backend)
+        return self._backend
+
+    def iterate(self) -> None:
+        """Relax the map: ``exp_loops`` passes of the backend, poses written back.
+
+        A map with fewer than two experiences or no link is left as it is, and so is
+        every map when ``exp_loops`` is 0 and the backend is the alpha rule.
+        """
+        loops = self.params.exp_loops
+        alpha = self.params.exp_backend.startswith("alpha")
+        if self._n < 2 or self._e == 0 or (loops == 0 and alpha):
+            return
+        pg = self.posegraph()
+        new = np.asarray(
+            self.backend.relax(pg, passes=loops, correction=self.params.exp_correction),
+            dtype=np.float64,
+        )
+        if new.shape != (self._n, 3) or not np.all(np.isfinite(new)):
+            raise GraphError(
+                f"backend {self.params.exp_backend!r} returned poses of shape {new.shape} "
+                f"(expected ({self._n}, 3), finite); check the backend"
+            )
+        self._pose[: self._n, :2] = new[:, :2]
+        self._pose[: self._n, 2] = wrap_rad(new[:, 2])
+        self._poses_dirty = True
+
+    # -------------------------------------------------------------- queries
+    def links(self) -> dict[str, np.ndarray]:
+        """Every link as arrays (creation order): ``src, dst, d, heading, facing, dt,
+        traversals, successes, trials, behaviour, confidence``, each (E,)."""
+        e = self._e
+        c = self._counts[:e]
+        return {
+            "src": self._src[:e].copy(),
+            "dst": self._dst[:e].copy(),
+            "d": self._link[:e, 0].copy(),
+            "heading": self._link[:e, 1].copy(),
+            "facing": self._link[:e, 2].copy(),
+            "dt": self._link[:e, 3].copy(),
+            "traversals": c[:, 0].copy(),
+            "successes": c[:, 1].copy(),
+            "trials": c[:, 2].copy(),
+            "behaviour": self._behaviour[:e].copy(),
+            "confidence": link_confidence(c[:, 1], c[:, 2]),
+        }
+
+    def link_components(self, frame: str = "local") -> np.ndarray:
+        """Link transitions ``[dx, dy, dth]`` (creation order).
+
+        Args:
+            frame: ``"local"``: in the source's frame (what is stored); ``"global"``: the
+                paper's map-frame ``(dx, dy)``, i.e. the local one rotated by the source's
+                current orientation. Map correction that turns a source by ``dth_i`` turns
+                its global components by ``dth_i`` (Eq. 8).
+
+        Shape:
+            Returns (E, 3).
+        """
+        m = self._meas[: self._e].copy()
+        if frame == "local":
+            return m
+        if frame == "global":
+            return rotate_link_components(m, self._pose[self._src[: self._e], 2])
+        raise InputError(f"frame must be 'local' or 'global', got {frame!r}")
+
+    def pose_cells(self) -> np.ndarray:
+        """Pose-cell coordinates ``(x', y', th')`` of every experience.
+
+        Shape:
+            Returns (N, 3).
+        """
+        return self._pc[: self._n].copy()
+
+    def template_ids(self) -> np.ndarray:
+        """Template id of every experience, (N,)."""
+        return self._vt[: self._n].copy()
+
+    def activity(
+        self,
+        pc: tuple[float, float, float] | np.ndarray,
+        template_id: int,
+        *,
+        dims: tuple[float, float] | None = None,
+    ) -> np.ndarray:
+        """Experience activity (Eqs. 1-4) with the zone constants ``exp_activity_zone_*``.
+
+        Args:
+            pc: pose-cell coordinates of the dominant packet (cells).
+            template_id: the current template.
+            dims: ``(pc_dim_xy, pc_dim_th)`` to measure pose-cell distances around the
+                wrapping network; None: plain differences as the paper prints them.
+
+        Shape:
+            pc: (3,). Returns (N,).
+        """
+        return experience_activity(
+            self._pc[: self._n],
+            self._vt[: self._n],
+            np.asarray(pc, dtype=np.float64),
+            int(template_id),
+            zone_xy=self.params.exp_activity_zone_xy,
+            zone_th=self.params.exp_activity_zone_th,
+            dims=dims,
+        )
+
+    def peak_experience(
+        self,
+        pc: tuple[float, float, float] | np.ndarray,
+        template_id: int,
+        *,
+        dims: tuple[float, float] | None = None,
+    ) -> tuple[int, float]:
+        """The most active experience and its activity (``(-1, 0.0)`` if none is active)."""
+        return peak_experience(self.activity(pc, template_id, dims=dims))
+
+    def _undirected(self) -> nx.Graph:
+        g = nx.Graph()
+        g.add_nodes_from(range(self._n))
+        e = self._e
+        w = self._link[:e, 3]
+        # one link per pair: no parallel links to resolve
+        g.add_weighted_edges_from(zip(self._src[:e].tolist(), self._dst[:e].tolist(), w.tolist()))
+        return g
+
+    def temporal_map(self, start: int | None = None, *, method: str = "dijkstra") -> np.ndarray:
+        """Time from ``start`` to every experience over link times (Eqs. 10-11).
+
+        Args:
+            start: the seeded (peak) experience; default the current one.
+            method: ``"dijkstra"`` (networkx) or ``"iterate"`` (the paper's synchronous
+                iteration, :func:`graph.features.temporal_map`); same result.
+
+        Shape:
+            Returns (N,) seconds, ``inf`` where unreachable.
+        """
+        start = self._check_id(self.current_id if start is None else start, "temporal-map start")
+        if method == "iterate":
+            edges = np.stack([self._src[: self._e], self._dst[: self._e]], axis=1)
+            return temporal_map(self._n, edges, self._link[: self._e, 3], start)
+        if method != "dijkstra":
+            raise InputError(f"method must be 'dijkstra' or 'iterate', got {method!r}")
+        dist = nx.single_source_dijkstra_path_length(self._undirected(), start, weight="weight")
+        out = np.full(self._n, np.inf)
+        out[np.fromiter(dist.keys(), dtype=np.int64)] = np.fromiter(dist.values(), dtype=np.float64)
+        return out
+
+    def route(self, goal: int, start: int | None = None) -> Route:
+        """Fastest route from ``start`` (default: current experience) to ``goal``.
+
+        Dijkstra over link times (links traversable both ways); the route lists the
+        experiences from start to goal with the estimated time to reach each one.
+
+        Raises:
+            GraphError: if the goal cannot be reached from the start.
+        """
+        start = self._check_id(self.current_id if start is None else start, "route start")
+        goal = self._check_id(goal, "route goal")
+        g = self._undirected()
+        try:
+            _, path = nx.single_source_dijkstra(g, start, goal, weight="weight")
+        except nx.NetworkXNoPath:
+            raise GraphError(
+                f"experience {goal} cannot be reached from {start}: no chain of links joins them"
+            ) from None
+        w = [g.edges[a, b]["weight"] for a, b in itertools.pairwise(path)]
+        times = np.concatenate([[0.0], np.cumsum(w)]).tolist()
+        return Route(ids=[int(i) for i in path], times=times)
+
+    # ---------------------------------------------------------------- state
+    def get_state(self) -> dict[str, Any]:
+        """Everything needed to restore the map exactly: numpy arrays and Python scalars."""
+        n, e = self._n, self._e
+        return {
+            "format": STATE_FORMAT,
+            "version": STATE_VERSION,
+            "poses": self._pose[:n].copy(),
+            "pc": self._pc[:n].copy(),
+            "template_id": self._vt[:n].copy(),
+            "frame": self._frame[:n].copy(),
+            "t": self._t[:n].copy(),
+            "link_ends": np.stack([self._src[:e], self._dst[:e]], axis=1),
+            "link_values": self._link[:e].copy(),
+            "link_counts": self._counts[:e].copy(),
+            "link_behaviour": self._behaviour[:e].copy(),
+            "current_id": int(self.current_id),
+            "prev_id": int(self.prev_id),
+            "accum_x": float(self.accum_x),
+            "accum_y": float(self.accum_y),
+            "accum_facing": float(self.accum_facing),
+            "accum_time": float(self.accum_time),
+            "relative_rad": float(self.relative_rad),
+        }
+
+    def set_state(self, state: dict[str, Any]) -> None:
+        """Restore a :meth:`get_state` dictionary (replaces the whole map)."""
+        if state.get("format") != STATE_FORMAT or state.get("version") != STATE_VERSION:
+            raise MapFormatError(
+                f"not an experience-map state of version {STATE_VERSION} "
+                f"(format={state.get('format')!r}, version={state.get('version')!r})"
+            )
+        try:
+            poses = np.array(state["poses"], dtype=np.float64).reshape(-1, 3)
+            n = len(poses)
+            pc = np.array(state["pc"], dtype=np.float64).reshape(n, 3)
+            vt = np.array(state["template_id"], dtype=np.int64).reshape(n)
+            frame = np.array(state["frame"], dtype=np.int64).reshape(n)
+            t = np.array(state["t"], dtype=np.float64).reshape(n)
+            ends = np.array(state["link_ends"], dtype=np.int64).reshape(-1, 2)
+            e = len(ends)
+            vals = np.array(state["link_values"], dtype=np.float64).reshape(e, 4)
+            counts = np.array(state["link_counts"], dtype=np.int64).reshape(e, 3)
+            beh = np.array(state["link_behaviour"], dtype=np.int64).reshape(e)
+            scalars = {
+                k: state[k]
+                for k in (
+                    "current_id",
+                    "prev_id",
+                    "accum_x",
+                    "accum_y",
+                    "accum_facing",
+                    "accum_time",
+                    "relative_rad",
+                )
+            }
+        except (KeyError, ValueError) as exc:
+            raise MapFormatError(
+                f"experience-map state is incomplete or malformed: {exc}"
+            ) from None
+        if e and (ends.min() < 0 or ends.max() >= n or np.any(ends[:, 0] == ends[:, 1])):
+            raise MapFormatError(
+                "experience-map state has links to missing experiences or self-links"
+            )
+        if not -1 <= int(scalars["current_id"]) < n or not -1 <= int(scalars["prev_id"]) < n:
+            raise MapFormatError("experience-map state has a current/previous id out of range")
+        self._clear()
+        self._reset_backend()
+        self._n, self._e = n, e
+        self._pose, self._pc, self._vt, self._frame, self._t = poses.copy(), pc, vt, frame, t
+        self._src, self._dst = ends[:, 0].copy(), ends[:, 1].copy()
+        self._link = vals
+        # the same scalar formula as at link creation, so measurements round-trip bit for bit
+        self._meas = np.array([_measurement_of(*v) for v in vals[:, :3].tolist()]).reshape(e, 3)
+        self._counts, self._behaviour = counts, beh
+        s, d = self._src.tolist(), self._dst.tolist()
+        self._eidx = {(a, b): i for i, (a, b) in enumerate(zip(s, d))}
+        if len(self._eidx) != e:
+            raise MapFormatError("experience-map state links a pair of experiences twice")
+        self._g.add_nodes_from((i, self._node_attrs(i)) for i in range(n))
+        self._g.add_edges_from((s[k], d[k], self._edge_attrs(k)) for k in range(e))
+        self.current_id = int(scalars["current_id"])
+        self.prev_id = int(scalars["prev_id"])
+        self.accum_x = float(scalars["accum_x"])
+        self.accum_y = float(scalars["accum_y"])
+        self.accum_facing = float(scalars["accum_facing"])
+        self.accum_time = float(scalars["accum_time"])
+        self.relative_rad = float(scalars["relative_rad"])

@@ -1,0 +1,219 @@
+"""The CLI: every option's help has an example; ``run`` writes every output; errors end
+with exit code 2 and a one-line message; ``compare-backends`` reads graphs and states."""
+
+import csv
+import json
+
+import numpy as np
+import pytest
+import torch
+
+from torchratslam.cli import build_parser, main
+
+torch.set_num_threads(1)
+
+SMALL = """\
+template_x_size: 32
+template_y_size: 8
+vt_panoramic: 1
+vt_step_match: 1
+vt_match_threshold: 0.06
+pc_dim_xy: 15
+pc_dim_th: 18
+pc_cell_x_size: 0.5
+pc_vt_inject_energy: 0.1
+exp_loops: 5
+"""
+SIM = "sim:loop?frames=60"
+
+
+def _subparser(name):
+    parser = build_parser()
+    for action in parser._subparsers._group_actions:
+        if name in action.choices:
+            return action.choices[name]
+    raise AssertionError(f"no subcommand {name}")
+
+
+@pytest.mark.parametrize("name", ["run", "compare-backends"])
+def test_every_option_help_has_an_example(name):
+    sub = _subparser(name)
+    for action in sub._actions:
+        if action.dest == "help":
+            continue
+        assert action.help and "e.g." in action.help, (
+            f"{name} {action.option_strings} lacks an example"
+        )
+    assert "examples:" in sub.format_help()
+
+
+@pytest.fixture(scope="module")
+def run_out(tmp_path_factory):
+    root = tmp_path_factory.mktemp("run")
+    cfg = root / "small.yaml"
+    cfg.write_text(SMALL)
+    out = root / "out"
+    code = main(["run", "--config", str(cfg), "--data", SIM, "--out", str(out), "--no-progress"])
+    return code, out, cfg
+
+
+def test_run_writes_every_output(run_out):
+    code, out, _ = run_out
+    assert code == 0
+    for name in ("metrics.json", "experiences.csv", "trajectory.csv", "map.png", "pose_cells.png"):
+        assert (out / name).is_file() and (out / name).stat().st_size > 0, name
+    assert (out / "state").is_dir()
+    m = json.loads((out / "metrics.json").read_text())
+    assert m["frames"] == 60
+    for key in ("templates", "experiences", "links", "wall_s", "ate_rmse_m"):
+        assert key in m
+    for module in ("local_view", "pose_cells", "experience_map"):
+        assert (
+            m["ms_per_frame"][module]["mean_ms"] > 0 and m["ms_per_frame"][module]["median_ms"] > 0
+        )
+    exps = list(csv.DictReader((out / "experiences.csv").open()))
+    assert list(exps[0]) == ["id", "x", "y", "th", "created_frame"]
+    assert len(exps) == m["experiences"] and [int(r["id"]) for r in exps] == list(range(len(exps)))
+    traj = list(csv.DictReader((out / "trajectory.csv").open()))
+    assert list(traj[0]) == ["frame", "t", "experience_id", "x", "y", "th"]
+    assert len(traj) == 60 and [int(r["frame"]) for r in traj] == list(range(60))
+    # each trajectory row carries the final pose of its experience
+    pose = {int(r["id"]): (float(r["x"]), float(r["y"]), float(r["th"])) for r in exps}
+    for r in traj:
+        assert (float(r["x"]), float(r["y"]), float(r["th"])) == pose[int(r["experience_id"])]
+    # the saved state loads back with the same map
+    from torchratslam.state import load_state
+
+    st = load_state(out / "state")
+    assert st.exp_pose.shape[0] == m["experiences"] and st.templates.shape[0] == m["templates"]
+    assert np.allclose(st.exp_pose[:, :2], [[float(r["x"]), float(r["y"])] for r in exps])
+
+
+def test_compare_backends_on_a_saved_state_and_a_g2o_file(run_out, tmp_path, capsys):
+    pytest.importorskip("graph.compare")
+    _, out, _ = run_out
+    js = tmp_path / "cmp.json"
+    assert (
+        main(
+            [
+                "compare-backends",
+                "--map",
+                str(out / "state"),
+                "--backends",
+                "alpha,gtsam",
+                "--json",
+                str(js),
+            ]
+        )
+        == 0
+    )
+    rows = json.loads(js.read_text())
+    assert [r["name"] for r in rows] == ["alpha", "gtsam"]
+    assert all("time_s" in r and "error" in r for r in rows)
+    printed = capsys.readouterr().out
+    assert "| alpha |" in printed and "| gtsam |" in printed
+
+    from graph.io import write_g2o
+    from torchratslam.cli.compare_backends import load_posegraph
+
+    pg = load_posegraph(out / "state")
+    g2o = tmp_path / "map.g2o"
+    write_g2o(pg, g2o)
+    gt = tmp_path / "gt.txt"
+    np.savetxt(gt, pg.poses)
+    assert (
+        main(
+            [
+                "compare-backends",
+                "--map",
+                str(g2o),
+                "--groundtruth",
+                str(gt),
+                "--backends",
+                "alpha",
+                "--json",
+                str(js),
+            ]
+        )
+        == 0
+    )
+    assert json.loads(js.read_text())[0]["ate_rmse_m"] is not None
+
+
+def _fails(argv, capsys, match):
+    code = main(argv)
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2
+    assert match in err[0] and "Traceback" not in "\n".join(err)
+    return err
+
+
+def test_cli_fails_cleanly_on_bad_input(tmp_path, capsys, run_out):
+    _, _, cfg = run_out
+    out = str(tmp_path / "o")
+    _fails(
+        ["run", "--config", str(cfg), "--data", str(tmp_path / "missing"), "--out", out],
+        capsys,
+        "not found",
+    )
+    _fails(
+        ["run", "--config", str(tmp_path / "nope.yaml"), "--data", SIM, "--out", out],
+        capsys,
+        "not found",
+    )
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("pc_dim_xyz: 3\n")
+    _fails(
+        ["run", "--config", str(bad), "--data", SIM, "--out", out],
+        capsys,
+        "did you mean 'pc_dim_xy'",
+    )
+    _fails(
+        ["run", "--config", str(cfg), "--data", SIM, "--out", out, "--max-frames", "0"],
+        capsys,
+        "--max-frames",
+    )
+    _fails(
+        ["run", "--config", str(cfg), "--data", "sim:nowhere", "--out", out],
+        capsys,
+        "unknown simulator tour",
+    )
+    _fails(
+        ["run", "--config", str(cfg), "--data", SIM, "--out", out, "--set", "exp_loops"],
+        capsys,
+        "KEY=VALUE",
+    )
+    (tmp_path / "d" / "frames").mkdir(parents=True)
+    _fails(
+        ["run", "--config", str(cfg), "--data", str(tmp_path / "d"), "--out", out],
+        capsys,
+        "no images",
+    )
+    _fails(["compare-backends", "--map", str(tmp_path / "none.g2o")], capsys, "not found")
+
+
+def test_run_on_a_written_dataset_directory(tmp_path, run_out):
+    from torchratslam.sim import open_sim, write_dataset
+
+    _, _, cfg = run_out
+    data = write_dataset(open_sim("sim:loop?frames=25"), tmp_path / "ds")
+    out = tmp_path / "out"
+    assert (
+        main(
+            [
+                "run",
+                "--config",
+                str(cfg),
+                "--data",
+                str(data),
+                "--out",
+                str(out),
+                "--no-progress",
+                "--max-frames",
+                "20",
+            ]
+        )
+        == 0
+    )
+    m = json.loads((out / "metrics.json").read_text())
+    assert m["frames"] == 20 and m["odometry"] == "given" and "ate_rmse_m" in m

@@ -1,0 +1,241 @@
+"""The pipeline: per-frame order, registries, pipelined == sequential, and end to end on
+a short simulated loop (the map closes the loop: ATE well below dead reckoning)."""
+
+
+import numpy as np
+import pytest
+import torch
+
+from graph.messages import Action, ActionKind
+from torchratslam.config import RatSLAMConfig
+from torchratslam.errors import ConfigError, InputError
+from torchratslam.messages import Frame, ViewMatch
+from torchratslam.pipeline import QUEUE_SIZE, RatSLAM
+from torchratslam.registry import EXPERIENCE_MAPS, LOCAL_VIEWS, ODOMETRY, POSE_CELLS
+
+torch.set_num_threads(1)
+
+
+# ----------------------------------------------------------------------------- fakes
+class Log(list):
+    pass
+
+
+class FakeView:
+    """Template id = image brightness bucket (deterministic, stateful)."""
+
+    def __init__(self, params, *, dtype=torch.float32, device=None, log=None):
+        self.log = log if log is not None else Log()
+        self.seen: dict[int, int] = {}
+
+    def process(self, image, frame_index=None):
+        self.log.append(("lv", frame_index))
+        key = int(np.asarray(image).mean()) // 10
+        new = key not in self.seen
+        if new:
+            self.seen[key] = len(self.seen)
+        return ViewMatch(self.seen[key], 0.0, 0.0, 0, new)
+
+    def __len__(self):
+        return len(self.seen)
+
+    @property
+    def templates(self):
+        return torch.zeros(len(self.seen), 1, 1)
+
+
+class FakePoseCells:
+    """Creates an experience for every new template, links to known ones."""
+
+    def __init__(self, params, *, dtype=torch.float32, device=None, log=None):
+        self.log = log if log is not None else Log()
+        self.exp_of: dict[int, int] = {}
+        self.current_exp = -1
+        self.pending = None
+        self.x = 0.0
+
+    def on_view_template(self, match):
+        self.log.append(("pc_vt", match.template_id))
+        self.pending = match
+
+    def on_odometry(self, vtrans, vrot, dt):
+        self.log.append(("pc_odo", round(vtrans, 6)))
+        self.x += vtrans * dt
+        m = self.pending
+        src = self.current_exp
+        if m.template_id not in self.exp_of:
+            self.exp_of[m.template_id] = len(self.exp_of)
+            self.current_exp = self.exp_of[m.template_id]
+            return Action(ActionKind.CREATE, self.current_exp, src)
+        dest = self.exp_of[m.template_id]
+        if dest == src:
+            return Action.none()
+        self.current_exp = dest
+        return Action(ActionKind.LINK, dest, src)
+
+    @property
+    def centre(self):
+        return torch.tensor([self.x, 0.0, 0.0])
+
+    @property
+    def activity(self):
+        return torch.zeros(2, 3, 3)
+
+
+def _frames(n, seed=0):
+    rng = np.random.default_rng(seed)
+    for k in range(n):
+        level = 10 * (k % 7) + 5
+        img = np.full((6, 8), level, dtype=np.uint8)
+        yield Frame(
+            k, 0.5 * k, img, vtrans=float(rng.random()), vrot=0.1, dt=0.0 if k == 0 else 0.5
+        )
+
+
+def _fake_slam(log, **kw):
+    from graph.experience_map import ExperienceMap
+
+    class LoggingMap(ExperienceMap):
+        def on_odometry(self, vtrans, vrot, dt):
+            log.append(("em_odo", round(vtrans, 6)))
+            super().on_odometry(vtrans, vrot, dt)
+
+        def apply(self, action, **kw):
+            log.append(("em_apply", int(action.kind)))
+            super().apply(action, **kw)
+
+        def iterate(self):
+            log.append(("em_iterate",))
+            super().iterate()
+
+    cfg = RatSLAMConfig()
+    return RatSLAM(
+        cfg,
+        local_view=FakeView(cfg.local_view, log=log),
+        pose_cells=FakePoseCells(cfg.pose_cells, log=log),
+        experience_map=LoggingMap(cfg.experience_map),
+        **kw,
+    )
+
+
+def test_per_frame_order_is_the_references():
+    log = Log()
+    slam = _fake_slam(log)
+    for f in _frames(3):
+        slam.step_frame(f)
+    per_frame = [e[0] for e in log]
+    assert per_frame == ["lv", "pc_vt", "pc_odo", "em_odo", "em_apply", "em_iterate"] * 3
+    # the same odometry reaches the pose cells and the experience map
+    assert [e for e in log if e[0] == "pc_odo"] != []
+    assert [e[1] for e in log if e[0] == "pc_odo"] == [e[1] for e in log if e[0] == "em_odo"]
+    assert [e[1] for e in log if e[0] == "lv"] == [0, 1, 2]
+    assert slam.frame_index == 3
+    assert set(slam.timings.modules) >= {"local_view", "pose_cells", "experience_map"}
+    assert slam.timings.summary()["local_view"]["count"] == 3
+
+
+def test_pipelined_mode_gives_exactly_the_sequential_map_with_fakes():
+    a, b = _fake_slam(Log()), _fake_slam(Log(), pipelined=True)
+    ra = a.run(_frames(60), progress=False)
+    rb = b.run(_frames(60), progress=False)
+    assert rb.pipelined and not ra.pipelined
+    assert (ra.frames, ra.templates, ra.experiences, ra.links) == (
+        rb.frames,
+        rb.templates,
+        rb.experiences,
+        rb.links,
+    )
+    assert np.array_equal(a.experience_map.poses, b.experience_map.poses)
+    assert np.array_equal(a.trajectory(), b.trajectory(), equal_nan=True)
+    assert QUEUE_SIZE == 10
+
+
+def test_pipelined_mode_propagates_errors_without_hanging():
+    slam = _fake_slam(Log(), pipelined=True)
+
+    def bad():
+        yield from _frames(30)
+        yield Frame(30, 20.0, None, vtrans=1.0, dt=0.5)  # no image
+
+    with pytest.raises(InputError, match="no image"):
+        slam.run(bad(), progress=False)
+
+
+def test_user_registered_modules_are_used_when_selected():
+    calls = Log()
+
+    @LOCAL_VIEWS.register("test_fake_view", overwrite=True)
+    class MyView(FakeView):
+        def __init__(self, params, *, dtype=torch.float32, device=None):
+            super().__init__(params, log=calls)
+
+    @POSE_CELLS.register("test_fake_pc", overwrite=True)
+    class MyPC(FakePoseCells):
+        def __init__(self, params, *, dtype=torch.float32, device=None):
+            super().__init__(params, log=calls)
+
+    @ODOMETRY.register("test_double", overwrite=True)
+    class Double:
+        def __init__(self, params):
+            pass
+
+        def __call__(self, frame):
+            return 2 * frame.vtrans, frame.vrot, frame.dt
+
+    slam = RatSLAM(
+        RatSLAMConfig(),
+        local_view="test_fake_view",
+        pose_cells="test_fake_pc",
+        odometry="test_double",
+    )
+    assert isinstance(slam.local_view, MyView) and isinstance(slam.pose_cells, MyPC)
+    r = slam.step_frame(Frame(0, 0.0, np.zeros((4, 4), np.uint8), vtrans=0.25, dt=1.0))
+    assert r.odometry == (0.5, 0.0, 1.0)
+    assert ("lv", 0) in calls and r.experience_id == 0
+    # swap at run time by name and by instance
+    slam.set_odometry("given")
+    assert (
+        slam.step_frame(Frame(1, 1.0, np.zeros((4, 4), np.uint8), vtrans=0.25, dt=1.0)).odometry[0]
+        == 0.25
+    )
+    EXPERIENCE_MAPS.register("test_em", lambda params: type("E", (), {})(), overwrite=True)
+    with pytest.raises(ConfigError, match="unknown local view 'nope'"):
+        slam.set_local_view("nope")
+
+
+def test_step_requires_odometry_when_it_is_given():
+    slam = _fake_slam(Log())
+    with pytest.raises(InputError, match="no odometry"):
+        slam.step(np.zeros((4, 4), np.uint8))
+    r = slam.step(np.zeros((4, 4), np.uint8), (1.0, 0.0, 0.0))
+    r = slam.step(np.zeros((4, 4), np.uint8), (1.0, 0.0, 0.5))
+    assert r.t == pytest.approx(0.5) and r.frame == 1
+
+
+def test_time_logger_statistics_and_threads():
+    import threading
+
+    from torchratslam.timing import TimeLogger
+
+    log = TimeLogger(("a", "b"))
+    values = [0.004, 0.001, 0.002, 0.010]
+    for v in values:
+        log.record("a", v)
+        log.record("b", v / 2)
+    s = log.summary()
+    assert s["a"]["count"] == 4
+    assert s["a"]["mean_ms"] == pytest.approx(1000 * sum(values) / 4)
+    assert s["a"]["median_ms"] == pytest.approx(1000 * (0.002 + 0.004) / 2)
+    assert s["total"]["mean_ms"] == pytest.approx(1.5 * 1000 * sum(values) / 4)
+    assert "| a | 4 |" in log.table()
+    # records from many threads are all kept
+    log.reset()
+    threads = [threading.Thread(target=lambda: [log.record("a", 0.001) for _ in range(500)]) for _ in range(4)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    assert log.summary()["a"]["count"] == 2000
+    with log.section("c"):
+        pass
+    assert log.per_frame_ms("c").shape == (1,)

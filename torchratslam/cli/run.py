@@ -1,0 +1,323 @@
+"""``torchratslam run``: map a dataset and write the map, metrics, figures and state."""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import io
+import json
+import math
+import os
+import sys
+import tempfile
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from graph.errors import ConfigError, InputError
+
+DESCRIPTION = """Run RatSLAM on a dataset.
+
+OUT receives: metrics.json (frames, templates, experiences, links, wall_s, per-module
+mean/median ms per frame, ate_rmse_m when there is ground truth), experiences.csv
+(id,x,y,th,created_frame; final poses), trajectory.csv (frame,t,experience_id,x,y,th:
+the experience current after each frame, with its final pose), map.png,
+pose_cells.png and the saved map state in OUT/state (load it with --load or
+torchratslam.state.load_state)."""
+
+EPILOG = """examples:
+  torchratslam run --config configs/virtual_tour.yaml --data sim:virtual_tour --out out/vt
+  torchratslam run --config irat --data irat_aus_28112011.bag --out out/irat --backend isam2
+  torchratslam run --config lab_tour --data lab.mp4 --odometry lab_odometry.csv --out out/lab
+  torchratslam run --config virtual_tour --data sim:virtual_tour/session2 --out out/s2 \\
+      --load out/s1/state
+"""
+
+
+def register(subparsers: Any) -> argparse.ArgumentParser:
+    p = subparsers.add_parser(
+        "run",
+        help="map a dataset (directory, video, ROS bag or sim:NAME)",
+        description=DESCRIPTION,
+        epilog=EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument(
+        "--config",
+        required=True,
+        metavar="CONFIG",
+        help="a YAML of configs/ (path or name, e.g. 'virtual_tour') or an OpenRatSLAM "
+        ".txt config, e.g. --config configs/irat.yaml",
+    )
+    p.add_argument(
+        "--data",
+        required=True,
+        metavar="DATA",
+        help="dataset: a directory (frames/, odometry.csv, groundtruth.csv), a video "
+        "(with --odometry), a ROS 1 .bag, or sim:NAME[/sessionK], e.g. --data sim:virtual_tour",
+    )
+    p.add_argument(
+        "--out",
+        required=True,
+        metavar="OUT",
+        help="output directory (created; files in it are replaced), e.g. --out out/vt",
+    )
+    p.add_argument(
+        "--backend",
+        choices=("alpha", "alpha_reference", "gtsam", "isam2"),
+        help="experience-map relaxation backend (overrides exp_backend), e.g. --backend isam2",
+    )
+    p.add_argument(
+        "--max-frames",
+        type=int,
+        metavar="N",
+        help="stop after N frames, e.g. --max-frames 500",
+    )
+    p.add_argument(
+        "--odometry",
+        metavar="FILE",
+        help="odometry CSV (header t,vtrans,vrot; one row per frame) for a video, or to "
+        "replace a directory's odometry.csv, e.g. --odometry lab_odometry.csv",
+    )
+    p.add_argument(
+        "--groundtruth",
+        metavar="FILE",
+        help="ground-truth CSV (t,x,y,theta) for a video, e.g. --groundtruth gt.csv",
+    )
+    p.add_argument(
+        "--visual-odometry",
+        action="store_true",
+        help="estimate odometry from the images (OpenRatSLAM's intensity profiles) even "
+        "when the data has wheel odometry; used automatically when it has none, "
+        "e.g. --visual-odometry",
+    )
+    p.add_argument(
+        "--load",
+        action="append",
+        metavar="MAP",
+        default=[],
+        help="a stored map to localise in and merge with (repeatable): a saved state "
+        "directory, a run's OUT directory, or a reference-format map, e.g. --load out/s1/state",
+    )
+    p.add_argument(
+        "--set",
+        action="append",
+        metavar="KEY=VALUE",
+        default=[],
+        help="override one config key (repeatable), e.g. --set exp_loops=50",
+    )
+    p.add_argument(
+        "--pipelined",
+        action="store_true",
+        help="one worker thread per module with bounded queues (same map), e.g. --pipelined",
+    )
+    p.add_argument(
+        "--image-topic",
+        default="/irat_red/camera/image/compressed",
+        metavar="TOPIC",
+        help="image topic of a .bag (CompressedImage or Image), "
+        "e.g. --image-topic /stlucia/camera/image/compressed",
+    )
+    p.add_argument(
+        "--odom-topic",
+        default="/irat_red/odom",
+        metavar="TOPIC",
+        help="nav_msgs/Odometry topic of a .bag, e.g. --odom-topic /irat_red/odom",
+    )
+    p.add_argument(
+        "--device",
+        default=None,
+        metavar="DEVICE",
+        help="torch device of the local view and pose cells, e.g. --device cuda",
+    )
+    p.add_argument("--no-progress", action="store_true", help="no progress bar, e.g. --no-progress")
+    p.set_defaults(func=main)
+    return p
+
+
+def _overrides(items: list[str]) -> dict[str, str]:
+    out: dict[str, str] = {}
+    for item in items:
+        if "=" not in item:
+            raise ConfigError(f"--set {item!r}: expected KEY=VALUE, e.g. --set exp_loops=50")
+        k, v = item.split("=", 1)
+        out[k.strip()] = v.strip()
+    return out
+
+
+def _atomic_text(path: Path, text: str) -> None:
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=".tmp-", suffix=path.suffix)
+    try:
+        with os.fdopen(fd, "w", newline="") as fh:
+            fh.write(text)
+        os.replace(tmp, path)
+    finally:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+
+
+def _csv_text(header: list[str], rows: np.ndarray, int_cols: tuple[int, ...]) -> str:
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(header)
+    for row in rows.tolist():
+        w.writerow([int(v) if i in int_cols else repr(float(v)) for i, v in enumerate(row)])
+    return buf.getvalue()
+
+
+def _created_frames(em: Any, n: int) -> np.ndarray:
+    g = em.graph
+    return np.asarray([int(g.nodes[i].get("frame", -1)) for i in range(n)], dtype=np.int64)
+
+
+def _links(em: Any) -> np.ndarray:
+    if hasattr(em, "links") and callable(em.links):
+        lk = em.links()
+        return np.stack([lk["src"], lk["dst"]], axis=1).astype(np.int64)
+    return np.asarray(list(em.graph.edges()), dtype=np.int64).reshape(-1, 2)
+
+
+def write_outputs(
+    slam: Any, out: Path, result: Any, *, data: Any, extra: dict[str, Any]
+) -> dict[str, Any]:
+    """Write metrics.json, experiences.csv, trajectory.csv, map.png, pose_cells.png and
+    state/ for a finished run. Returns the metrics."""
+    from torchratslam.eval import interpolate_groundtruth
+    from torchratslam.plots import plot_map, plot_pose_cells
+
+    out.mkdir(parents=True, exist_ok=True)
+    em = slam.experience_map
+    poses = np.asarray(em.poses, dtype=np.float64).reshape(-1, 3)
+    n = poses.shape[0]
+    exp_rows = np.column_stack([np.arange(n), poses, _created_frames(em, n)])
+    _atomic_text(
+        out / "experiences.csv",
+        _csv_text(["id", "x", "y", "th", "created_frame"], exp_rows, (0, 4)),
+    )
+    traj = slam.trajectory()
+    _atomic_text(
+        out / "trajectory.csv",
+        _csv_text(["frame", "t", "experience_id", "x", "y", "th"], traj, (0, 2)),
+    )
+    gt_xy = slam.groundtruth_poses()
+    gt_table = data.groundtruth() if hasattr(data, "groundtruth") else None
+    if gt_xy is None and gt_table is not None and len(gt_table) and traj.shape[0]:
+        gt_xy = interpolate_groundtruth(gt_table, traj[:, 1])
+    ate = dr = None
+    if gt_xy is not None and traj.shape[0] >= 2:
+        table = None if slam.groundtruth_poses() is not None else gt_table
+        ate = slam.ate(table)
+        dr = slam.dead_reckoning_ate(table)
+    summary = result.timings
+    per_module = {
+        name: {"mean_ms": s["mean_ms"], "median_ms": s["median_ms"]} for name, s in summary.items()
+    }
+    metrics: dict[str, Any] = {
+        "frames": int(slam.frame_index),
+        "frames_this_run": int(result.frames),
+        "templates": int(result.templates),
+        "experiences": int(result.experiences),
+        "links": int(result.links),
+        "wall_s": float(result.wall_s),
+        "fps": float(result.fps),
+        "ms_per_frame": per_module,
+        "pipelined": bool(result.pipelined),
+        "backend": slam.config.experience_map.exp_backend,
+        "odometry": slam.odometry_name,
+        **extra,
+    }
+    if ate is not None:
+        metrics["ate_rmse_m"] = float(ate)
+    if dr is not None:
+        metrics["dead_reckoning_ate_m"] = float(dr)
+    if hasattr(slam, "merges"):
+        metrics["merges"] = _jsonable(slam.merges)
+    plot_map(
+        out / "map.png",
+        poses,
+        _links(em),
+        trajectory_xy=traj[:, 3:5] if gt_xy is not None else None,
+        groundtruth_xy=None if gt_xy is None else np.asarray(gt_xy)[:, :2],
+        world=getattr(data, "world", None),
+        title=str(extra.get("data", "experience map")),
+    )
+    plot_pose_cells(out / "pose_cells.png", slam.activity)
+    from torchratslam.state import save_state
+
+    save_state(slam, out / "state")
+    _atomic_text(out / "metrics.json", json.dumps(metrics, indent=2, default=_json_default) + "\n")
+    return metrics
+
+
+def _json_default(v: Any) -> Any:
+    if isinstance(v, np.generic):
+        return v.item()
+    if isinstance(v, np.ndarray):
+        return v.tolist()
+    return str(v)
+
+
+def _jsonable(v: Any) -> Any:
+    return json.loads(json.dumps(v, default=_json_default))
+
+
+def main(args: argparse.Namespace) -> int:
+    import torch
+
+    from torchratslam.config import load_config
+    from torchratslam.pipeline import RatSLAM
+    from torchratslam.readers import open_data
+
+    if args.max_frames is not None and args.max_frames <= 0:
+        raise InputError(f"--max-frames must be a positive number of frames, got {args.max_frames}")
+    overrides = _overrides(args.set)
+    if args.backend:
+        overrides["exp_backend"] = args.backend
+    config = load_config(args.config, **overrides)
+    data = open_data(
+        args.data,
+        odometry=args.odometry,
+        groundtruth=args.groundtruth,
+        image_topic=args.image_topic,
+        odom_topic=args.odom_topic,
+    )
+    odometry = "given"
+    if args.visual_odometry or not getattr(data, "has_odometry", True):
+        odometry = "visual"
+        if not args.visual_odometry:
+            print(
+                f"torchratslam run: {args.data} has no odometry; using visual odometry",
+                file=sys.stderr,
+            )
+    out = Path(args.out)
+    if out.exists() and not out.is_dir():
+        raise InputError(f"--out {out}: exists and is not a directory; choose another path")
+    out.mkdir(parents=True, exist_ok=True)
+    device = torch.device(args.device) if args.device else None
+    kwargs: dict[str, Any] = {"odometry": odometry, "device": device, "pipelined": args.pipelined}
+    if args.load:
+        from torchratslam.multisession import MultiSessionRatSLAM
+        from torchratslam.state import load_state
+
+        stored = [load_state(p) for p in args.load]
+        slam = MultiSessionRatSLAM(config, stored, **kwargs)
+    else:
+        slam = RatSLAM(config, **kwargs)
+    result = slam.run(data, max_frames=args.max_frames, progress=not args.no_progress)
+    if result.frames == 0:
+        raise InputError(f"{args.data}: no frames were read; check the dataset")
+    extra = {"data": str(args.data), "config": str(args.config)}
+    if args.load:
+        extra["loaded"] = [str(p) for p in args.load]
+    metrics = write_outputs(slam, out, result, data=data, extra=extra)
+    line = (
+        f"{metrics['frames_this_run']} frames in {metrics['wall_s']:.1f} s "
+        f"({metrics['fps']:.1f} frames/s): {metrics['templates']} templates, "
+        f"{metrics['experiences']} experiences, {metrics['links']} links"
+    )
+    if "ate_rmse_m" in metrics:
+        ate = metrics["ate_rmse_m"]
+        line += f", ATE {ate:.3f} m" if math.isfinite(ate) else ""
+    print(f"{line}; wrote {out}")
+    return 0

@@ -1,0 +1,119 @@
+"""Per-module time logger, like xRatSLAM's: milliseconds per frame for each module.
+
+Each module's work on one frame is timed on its own (``time.perf_counter`` around the
+call), so the figures exclude time spent waiting on queues in the pipelined mode and
+time spent reading the data. Recording is thread-safe: in the pipelined mode every
+worker thread records its own module.
+
+Example:
+    >>> from torchratslam.timing import TimeLogger
+    >>> log = TimeLogger()
+    >>> with log.section("local_view"):
+    ...     pass
+    >>> log.summary()["local_view"]["count"]
+    1
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections.abc import Iterator
+from contextlib import contextmanager
+from typing import Any
+
+import numpy as np
+
+__all__ = ["MODULES", "TimeLogger"]
+
+MODULES = ("odometry", "local_view", "pose_cells", "experience_map")
+"""The modules the pipeline times, in per-frame order."""
+
+
+class TimeLogger:
+    """Collects one duration per frame for each named module.
+
+    Args:
+        modules: names known from the start (they appear in :meth:`summary` even when
+            never timed); other names are added on first use.
+    """
+
+    def __init__(self, modules: tuple[str, ...] | list[str] = MODULES) -> None:
+        self._lock = threading.Lock()
+        self._ms: dict[str, list[float]] = {name: [] for name in modules}
+
+    def record(self, module: str, seconds: float) -> None:
+        """Append one frame's duration (seconds) for ``module``."""
+        with self._lock:
+            self._ms.setdefault(module, []).append(seconds * 1000.0)
+
+    @contextmanager
+    def section(self, module: str) -> Iterator[None]:
+        """Time the body of a ``with`` block as one frame of ``module``."""
+        t0 = time.perf_counter()
+        try:
+            yield
+        finally:
+            self.record(module, time.perf_counter() - t0)
+
+    def reset(self) -> None:
+        """Forget every recorded duration (module names are kept)."""
+        with self._lock:
+            for values in self._ms.values():
+                values.clear()
+
+    @property
+    def modules(self) -> list[str]:
+        """Module names in first-use order."""
+        return list(self._ms)
+
+    def per_frame_ms(self, module: str) -> np.ndarray:
+        """The recorded durations of ``module`` in milliseconds, in frame order.
+
+        Shape:
+            returns ``(F,)`` float64, F the number of frames recorded for the module.
+        """
+        with self._lock:
+            return np.asarray(self._ms.get(module, []), dtype=np.float64)
+
+    def summary(self) -> dict[str, dict[str, Any]]:
+        """Per module: ``count``, ``mean_ms``, ``median_ms``, ``max_ms``, ``total_s``.
+
+        A ``"total"`` entry sums the modules frame by frame (over the frames that
+        every timed module recorded).
+        """
+        out: dict[str, dict[str, Any]] = {}
+        columns = []
+        for name in self.modules:
+            ms = self.per_frame_ms(name)
+            out[name] = _stats(ms)
+            if ms.size:
+                columns.append(ms)
+        if columns:
+            n = min(c.size for c in columns)
+            out["total"] = _stats(np.sum([c[:n] for c in columns], axis=0))
+        else:
+            out["total"] = _stats(np.zeros(0))
+        return out
+
+    def table(self) -> str:
+        """A Markdown table of :meth:`summary`."""
+        lines = ["| module | frames | mean ms | median ms | max ms |", "|---|---|---|---|---|"]
+        for name, s in self.summary().items():
+            lines.append(
+                f"| {name} | {s['count']} | {s['mean_ms']:.3f} | {s['median_ms']:.3f} "
+                f"| {s['max_ms']:.3f} |"
+            )
+        return "\n".join(lines)
+
+
+def _stats(ms: np.ndarray) -> dict[str, Any]:
+    if ms.size == 0:
+        return {"count": 0, "mean_ms": 0.0, "median_ms": 0.0, "max_ms": 0.0, "total_s": 0.0}
+    return {
+        "count": int(ms.size),
+        "mean_ms": float(ms.mean()),
+        "median_ms": float(np.median(ms)),
+        "max_ms": float(ms.max()),
+        "total_s": float(ms.sum() / 1000.0),
+    }
