@@ -4,11 +4,12 @@ from __future__ import annotations
 
 import os
 import time
+from collections.abc import Callable
 
 import numpy as np
 
 
-def _rate(fn, n: int) -> float:  # noqa: ANN001
+def _rate(fn: Callable[[int], object], n: int) -> float:
     fn(0)  # warm caches
     t0 = time.perf_counter()
     for k in range(n):
@@ -34,9 +35,19 @@ def main() -> None:
     irat = get_tour("irat_like").full()
     busy = get_tour("loop", moving_obstacles=6, moved_obstacles=4, pixel_noise=3.0).full()
     cases = [
-        ("virtual_tour render", "panoramic 256x64", len(vt.world), lambda k: vt.render(k % len(vt))),
+        (
+            "virtual_tour render",
+            "panoramic 256x64",
+            len(vt.world),
+            lambda k: vt.render(k % len(vt)),
+        ),
         ("loop render", "panoramic 256x64", len(loop.world), lambda k: loop.render(k % len(loop))),
-        ("irat_like render", "forward 160x96", len(irat.world), lambda k: irat.render(k % len(irat))),
+        (
+            "irat_like render",
+            "forward 160x96",
+            len(irat.world),
+            lambda k: irat.render(k % len(irat)),
+        ),
         ("lab_tour render", "forward 640x480", len(lab.world), lambda k: lab.render(k % len(lab))),
         ("loop lasers", "2 x 682 beams", len(loop.world), lambda k: loop.scans(k % len(loop))),
         ("loop Frame", "256x64 + lasers", len(loop.world), lambda k: loop.frame(k % len(loop))),

@@ -54,6 +54,7 @@ from graph.features import (
 )
 from graph.messages import Action, ActionKind
 from graph.params import ExperienceMapParams
+from graph.posegraph import PoseGraph
 
 __all__ = ["ExperienceMap", "Route"]
 
@@ -64,7 +65,7 @@ STATE_VERSION = 1
 class RelaxationBackend(Protocol):
     """What :meth:`ExperienceMap.iterate` needs from a backend (see ``graph.backends``)."""
 
-    def relax(self, pg: Any, *, passes: int, correction: float = 0.5) -> np.ndarray: ...
+    def relax(self, pg: PoseGraph, *, passes: int, correction: float = 0.5) -> np.ndarray: ...
 
 
 def _grow(a: np.ndarray, need: int) -> np.ndarray:
@@ -438,7 +439,7 @@ class ExperienceMap:
         if cur >= 0:
             self._transition(cur, new, behaviour)
             self._link_from_accumulators(cur, new, 0.0, behaviour)
-        self.set_current(new, 0.0, behaviour=behaviour, _counted=True)
+        self._make_current(new, 0.0)
         return new
 
     def _link_from_accumulators(
@@ -465,23 +466,27 @@ class ExperienceMap:
         if cur >= 0 and cur != dest:
             self._repeat_or_count(cur, dest, relative_rad, behaviour)
             added = self._link_from_accumulators(cur, dest, relative_rad, behaviour)
-        self.set_current(dest, relative_rad, behaviour=behaviour, _counted=True)
+        self._make_current(dest, relative_rad)
         return added
 
-    def set_current(
-        self, dest: int, relative_rad: float = 0.0, *, behaviour: int = 0, _counted: bool = False
-    ) -> None:
+    def set_current(self, dest: int, relative_rad: float = 0.0, *, behaviour: int = 0) -> None:
         """``SET``: make ``dest`` current; accumulators restart from its pose.
 
         Nothing happens when ``dest`` is already current. Otherwise ``accum_x = accum_y
         = 0`` and ``accum_facing = wrap(th_dest + relative_rad)``; the elapsed time is
-        kept (OpenRatSLAM resets it only when a link is made).
+        kept (OpenRatSLAM resets it only when a link is made). The move counts as a
+        transition for Eq. 9 and, with ``exp_link_averaging``, is averaged into the link
+        between the two experiences if there is one (Eq. 6).
         """
         dest = self._check_id(dest, "SET target")
+        if dest != self.current_id and self.current_id >= 0:
+            self._repeat_or_count(self.current_id, dest, relative_rad, behaviour)
+        self._make_current(dest, relative_rad)
+
+    def _make_current(self, dest: int, relative_rad: float) -> None:
+        """OpenRatSLAM's ``on_set_experience`` (no bookkeeping)."""
         if dest == self.current_id:
             return
-        if not _counted and self.current_id >= 0:
-            self._repeat_or_count(self.current_id, dest, relative_rad, behaviour)
         self.prev_id = self.current_id
         self.current_id = dest
         self.accum_x = 0.0
@@ -542,7 +547,7 @@ class ExperienceMap:
             self._order = np.argsort(self._src[: self._e], kind="stable")
         return self._order
 
-    def posegraph(self, order: str = "creation") -> Any:
+    def posegraph(self, order: str = "creation") -> PoseGraph:
         """The map as a :class:`graph.posegraph.PoseGraph` (built from the arrays, no loops).
 
         Args:
@@ -552,8 +557,6 @@ class ExperienceMap:
                 OpenRatSLAM's order. ``"reference"`` lists them in that order (by
                 source experience, then creation).
         """
-        from graph.posegraph import PoseGraph
-
         e = self._e
         if order == "reference":
             idx = self._reference_order()
@@ -767,11 +770,21 @@ class ExperienceMap:
         }
 
     def set_state(self, state: dict[str, Any]) -> None:
-        """Restore a :meth:`get_state` dictionary (replaces the whole map)."""
-        if state.get("format") != STATE_FORMAT or state.get("version") != STATE_VERSION:
+        """Restore a :meth:`get_state` dictionary (replaces the whole map).
+
+        ``format``, ``version`` and ``relative_rad`` may be absent (importers); every
+        other key is required.
+
+        Raises:
+            MapFormatError: a key is missing, an array has the wrong shape, a link points
+                at a missing experience, or the format/version is not this one. The map is
+                left unchanged.
+        """
+        fmt, version = state.get("format", STATE_FORMAT), state.get("version", STATE_VERSION)
+        if fmt != STATE_FORMAT or version != STATE_VERSION:
             raise MapFormatError(
                 f"not an experience-map state of version {STATE_VERSION} "
-                f"(format={state.get('format')!r}, version={state.get('version')!r})"
+                f"(format={fmt!r}, version={version!r}); save it again with this version"
             )
         try:
             poses = np.array(state["poses"], dtype=np.float64).reshape(-1, 3)
@@ -794,9 +807,9 @@ class ExperienceMap:
                     "accum_y",
                     "accum_facing",
                     "accum_time",
-                    "relative_rad",
                 )
             }
+            scalars["relative_rad"] = state.get("relative_rad", 0.0)
         except (KeyError, ValueError) as exc:
             raise MapFormatError(
                 f"experience-map state is incomplete or malformed: {exc}"
@@ -805,27 +818,37 @@ class ExperienceMap:
             raise MapFormatError(
                 "experience-map state has links to missing experiences or self-links"
             )
-        if not -1 <= int(scalars["current_id"]) < n or not -1 <= int(scalars["prev_id"]) < n:
+        try:
+            ids = {k: int(scalars[k]) for k in ("current_id", "prev_id")}
+            floats = {
+                k: float(scalars[k])
+                for k in ("accum_x", "accum_y", "accum_facing", "accum_time", "relative_rad")
+            }
+        except (TypeError, ValueError) as exc:
+            raise MapFormatError(f"experience-map state has a malformed scalar: {exc}") from None
+        if not all(-1 <= v < n for v in ids.values()):
             raise MapFormatError("experience-map state has a current/previous id out of range")
+        s, d = ends[:, 0].tolist(), ends[:, 1].tolist()
+        eidx = {(a, b): i for i, (a, b) in enumerate(zip(s, d))}
+        if len(eidx) != e:
+            raise MapFormatError(
+                "experience-map state links a pair of experiences twice; keep one link per pair"
+            )
         self._clear()
         self._reset_backend()
         self._n, self._e = n, e
-        self._pose, self._pc, self._vt, self._frame, self._t = poses.copy(), pc, vt, frame, t
+        self._pose, self._pc, self._vt, self._frame, self._t = poses, pc, vt, frame, t
         self._src, self._dst = ends[:, 0].copy(), ends[:, 1].copy()
         self._link = vals
         # the same scalar formula as at link creation, so measurements round-trip bit for bit
         self._meas = np.array([_measurement_of(*v) for v in vals[:, :3].tolist()]).reshape(e, 3)
         self._counts, self._behaviour = counts, beh
-        s, d = self._src.tolist(), self._dst.tolist()
-        self._eidx = {(a, b): i for i, (a, b) in enumerate(zip(s, d))}
-        if len(self._eidx) != e:
-            raise MapFormatError("experience-map state links a pair of experiences twice")
+        self._eidx = eidx
         self._g.add_nodes_from((i, self._node_attrs(i)) for i in range(n))
         self._g.add_edges_from((s[k], d[k], self._edge_attrs(k)) for k in range(e))
-        self.current_id = int(scalars["current_id"])
-        self.prev_id = int(scalars["prev_id"])
-        self.accum_x = float(scalars["accum_x"])
-        self.accum_y = float(scalars["accum_y"])
-        self.accum_facing = float(scalars["accum_facing"])
-        self.accum_time = float(scalars["accum_time"])
-        self.relative_rad = float(scalars["relative_rad"])
+        self.current_id, self.prev_id = ids["current_id"], ids["prev_id"]
+        self.accum_x = floats["accum_x"]
+        self.accum_y = floats["accum_y"]
+        self.accum_facing = floats["accum_facing"]
+        self.accum_time = floats["accum_time"]
+        self.relative_rad = floats["relative_rad"]

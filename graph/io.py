@@ -46,7 +46,11 @@ def _info_from_upper(v: np.ndarray, fmt: str) -> np.ndarray:
     else:  # TORO: I11 I12 I22 I33 I13 I23
         i11, i12, i22, i33, i13, i23 = v.T
     return np.stack(
-        [np.stack([i11, i12, i13], -1), np.stack([i12, i22, i23], -1), np.stack([i13, i23, i33], -1)],
+        [
+            np.stack([i11, i12, i13], -1),
+            np.stack([i12, i22, i23], -1),
+            np.stack([i13, i23, i33], -1),
+        ],
         axis=-2,
     )
 
@@ -70,7 +74,9 @@ def _is_city_edge(tok: list[str]) -> bool:
     return n >= 1 and len(tok) == 6 + 3 * n
 
 
-def read_posegraph(path: str | os.PathLike, *, format: str | None = None) -> PoseGraph:
+def read_posegraph(
+    path: str | os.PathLike, *, format: str | None = None, initial: str = "file"
+) -> PoseGraph:
     """Read a 2D pose graph file (g2o, TORO or the city10000 variant).
 
     Args:
@@ -78,6 +84,9 @@ def read_posegraph(path: str | os.PathLike, *, format: str | None = None) -> Pos
         format: "g2o", "toro" or "city" (it decides the order of the information
             entries); ``None`` detects it: g2o for ``*_SE2`` tags or a ``.g2o`` suffix,
             city for vertex-less files whose edges all have the city layout, else TORO.
+        initial: "file" (the VERTEX poses; composed odometry when there are none) or
+            "odometry" (always compose the odometry edges ``i -> i+1`` in row order,
+            the initial estimate of the issue-4 reference figures).
 
     Returns:
         A :class:`PoseGraph`; ``ids`` are the file's vertex ids, rows follow the vertex
@@ -93,6 +102,8 @@ def read_posegraph(path: str | os.PathLike, *, format: str | None = None) -> Pos
     path = Path(path)
     if not path.is_file():
         raise InputError(f"pose-graph file {str(path)!r} does not exist")
+    if initial not in ("file", "odometry"):
+        raise InputError(f"initial must be 'file' or 'odometry', got {initial!r}")
     if format is not None and format not in FORMATS:
         raise MapFormatError(f"unknown pose-graph format {format!r} (valid: {', '.join(FORMATS)})")
     vertices: list[list[str]] = []
@@ -132,9 +143,7 @@ def read_posegraph(path: str | os.PathLike, *, format: str | None = None) -> Pos
         try:
             out = np.array([r[cols] for r in rows], dtype=np.float64)
         except ValueError as exc:  # ragged or non-numeric
-            bad = next(
-                (i for i, r in enumerate(rows) if len(r[cols]) != len(rows[0][cols])), None
-            )
+            bad = next((i for i, r in enumerate(rows) if len(r[cols]) != len(rows[0][cols])), None)
             line = f" (line {where[bad]})" if what == "edge" and bad is not None else ""
             raise MapFormatError(f"{path.name}: malformed {what} line{line}: {exc}") from None
         return out
@@ -199,6 +208,8 @@ def read_posegraph(path: str | os.PathLike, *, format: str | None = None) -> Pos
         rows = ids12
         poses = compose_odometry(n, ids12, meas)
     try:
+        if initial == "odometry" and vertices:
+            poses = compose_odometry(len(vid), rows, meas, start=poses[0])
         return PoseGraph(poses, rows, meas, vid, info)
     except InputError as exc:
         raise MapFormatError(f"{path.name}: {exc}") from None
@@ -224,8 +235,7 @@ def _write(pg: PoseGraph, path: str | os.PathLike, fmt: str) -> None:
         info = np.broadcast_to(np.eye(3), (pg.num_edges, 3, 3))
     upper = _info_to_upper(info, fmt)
     lines = [
-        f"{vtag} {i} {x!r} {y!r} {th!r}"
-        for i, (x, y, th) in zip(ids.tolist(), pg.poses.tolist())
+        f"{vtag} {i} {x!r} {y!r} {th!r}" for i, (x, y, th) in zip(ids.tolist(), pg.poses.tolist())
     ]
     eids = ids[pg.edges].tolist()
     for (a, b), m, u in zip(eids, pg.measurements.tolist(), upper.tolist()):

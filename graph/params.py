@@ -127,7 +127,7 @@ class ExperienceMapParams(Params):
     exp_loops: int = param(10, "relaxation passes per step", ge=0)
     exp_initial_em_deg: float = param(90.0, "initial heading of the map (degrees)")
     exp_backend: str = param("alpha", "relaxation backend: alpha | gtsam | isam2")
-    # Experience-map paper (Milford, Wyeth & Prasser 2005) features; defaults keep
+    # Experience-map paper (Milford, Wyeth & Prasser 2006) features; defaults keep
     # OpenRatSLAM's behaviour (no averaging, no link deletion).
     exp_activity_zone_xy: float = param(
         2.0, "r_a of Eq. 1: pose-cell (x', y') zone constant of experience activity (cells)", gt=0.0

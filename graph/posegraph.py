@@ -140,7 +140,9 @@ class PoseGraph:
             )
         if e and np.any(self.edges[:, 0] == self.edges[:, 1]):
             bad = int(np.flatnonzero(self.edges[:, 0] == self.edges[:, 1])[0])
-            raise InputError(f"PoseGraph edge {bad} links node {self.edges[bad, 0]} to itself; remove it")
+            raise InputError(
+                f"PoseGraph edge {bad} links node {self.edges[bad, 0]} to itself; remove it"
+            )
         if not (np.all(np.isfinite(self.poses)) and np.all(np.isfinite(self.measurements))):
             raise InputError("PoseGraph poses and measurements must be finite (found NaN or inf)")
         if self.ids is not None:
@@ -207,7 +209,9 @@ class PoseGraph:
         """
         d = np.asarray(d, dtype=np.float64)
         heading = np.asarray(heading, dtype=np.float64)
-        meas = np.stack([d * np.cos(heading), d * np.sin(heading), np.asarray(facing, dtype=np.float64)], -1)
+        meas = np.stack(
+            [d * np.cos(heading), d * np.sin(heading), np.asarray(facing, dtype=np.float64)], -1
+        )
         return cls(poses, edges, meas.reshape(-1, 3), ids)
 
     def links(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

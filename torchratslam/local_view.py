@@ -252,6 +252,7 @@ class TemplateBank:
             "colsum": torch.zeros(capacity, x, **kw),
             "colsort": torch.zeros(capacity, x, **kw),
             "rowsum": torch.zeros(capacity, y, **kw),
+            "gcum": torch.zeros(capacity, min(4, y), x + 1, **kw),
             "frames": torch.full((capacity,), -1, dtype=torch.int64, device=self.device),
         }
         for name, tensor in new.items():
@@ -301,11 +302,18 @@ class TemplateBank:
     def rowsum(self) -> torch.Tensor:
         return self._rowsum[: self._n]
 
+    @property
+    def gcum(self) -> torch.Tensor:
+        """Cumulative column sums of up to 4 row groups, shape ``(N, G, X + 1)``."""
+        return self._gcum[: self._n]
+
     def bytes_per_template(self) -> int:
         """Memory per stored template (data, metadata and bound summaries)."""
-        per = (self.y_size * self.x_size + 1 + 2 * self.x_size + self.y_size) * (
-            torch.finfo(self.dtype).bits // 8
+        g = min(4, self.y_size)
+        floats = (
+            self.y_size * self.x_size + 1 + 2 * self.x_size + self.y_size + g * (self.x_size + 1)
         )
+        per = floats * (torch.finfo(self.dtype).bits // 8)
         return per + 8
 
     def append(self, templates: torch.Tensor, frames: torch.Tensor | int | None = None) -> range:
@@ -340,6 +348,8 @@ class TemplateBank:
         self._colsum[sl] = cs
         self._colsort[sl] = cs.sort(-1).values
         self._rowsum[sl] = t.sum(2)
+        gsums = torch.stack([g.sum(-2) for g in _row_groups(t)], dim=1)  # (K, G, X)
+        self._gcum[sl, :, 1:] = gsums.cumsum(-1)
         if frames is None:
             frames = -1
         self._frames[sl] = torch.as_tensor(frames, dtype=torch.int64, device=self.device)
@@ -351,7 +361,23 @@ class TemplateBank:
 
 
 class TemplateMatcher:
-    """Exact best (template, offset) by mean absolute difference, with pruning.
+    """Exact best (template, offset) by mean absolute difference, with exact pruning.
+
+    The search is a cascade of lower bounds of a pair's sum of absolute differences
+    (SAD), each cheaper than the next: a template or pair is skipped only when its bound
+    exceeds the best SAD already found (plus a rounding margin), so the answer equals a
+    brute-force loop's. Bounds (all follow from the triangle inequality):
+
+    * panoramic, per template (any offset): L1 distance of the row sums (circular shifts
+      keep them), and of the sorted column sums (L1 between sorted profiles is the least
+      L1 over all column permutations);
+    * normal mode, per (template, offset): L1 distance of the compared window's sums over
+      a few groups of rows;
+    * per (template, offset): L1 distance of the column-sum profiles.
+
+    Exact errors are then evaluated for the surviving pairs in increasing order of their
+    bound, in chunks that grow geometrically, stopping when the next bound exceeds the
+    best error.
 
     Args:
         y_size: template rows.
@@ -379,7 +405,7 @@ class TemplateMatcher:
         if self.panoramic:
             self.width = x_size
             offs = torch.arange(0, x_size, step)
-            cols = (torch.arange(x_size)[None, :] + offs[:, None]) % x_size  # (K, X)
+            self._start = 0
         else:
             self.width = x_size - 2 * shift
             if self.width <= 0:
@@ -388,41 +414,65 @@ class TemplateMatcher:
                     "normal (non-panoramic) mode; lower vt_shift_match or widen the template"
                 )
             offs = torch.arange(0, 2 * shift + 1, step)
-            cols = offs[:, None] + torch.arange(self.width)[None, :]
+            self._start = shift
         self.offsets = offs.to(device)
         self.n_offsets = int(offs.numel())
-        rows = torch.arange(y_size)[None, :, None] * x_size
-        # (K, Y*W): flat index in a template of the pixel compared with view pixel (y, w)
-        self._index = (rows + cols[:, None, :]).reshape(self.n_offsets, -1).to(device)
-        self._cols = cols.to(device)
         self.npix = y_size * self.width
+        # view column compared with template column c at offset k (panoramic): c - o mod X
+        cols = torch.arange(x_size)
+        self._roll = ((cols[None, :] - offs[:, None]) % x_size).to(device)  # (K, X)
+        # normal mode: template columns of each offset's window
+        self._win = (offs[:, None] + torch.arange(self.width)[None, :]).to(device)  # (K, W)
 
     # ----------------------------------------------------------------- view side
 
-    def view_block(self, view: torch.Tensor) -> torch.Tensor:
-        """The view pixels that are compared, shape ``(Y * W,)``."""
+    def _view_parts(self, view: torch.Tensor) -> dict:
+        """Per-frame view summaries used by the bounds and the exact kernel."""
+        parts: dict = {"view": view, "col": view.sum(0)}
         if self.panoramic:
-            return view.reshape(-1)
-        return view[:, self.shift : self.shift + self.width].reshape(-1)
+            parts["rolled"] = view[:, self._roll].permute(1, 0, 2).reshape(self.n_offsets, -1)
+            parts["rowsum"] = view.sum(1)
+            parts["colsort"] = parts["col"].sort().values
+            parts["col_rolled"] = parts["col"][self._roll]  # (K, X)
+        else:
+            block = view[:, self.shift : self.shift + self.width]
+            parts["block"] = block.contiguous()
+            parts["gsum"] = torch.stack([g.sum() for g in _row_groups(block)])  # (G,)
+            parts["col_block"] = parts["col"][self.shift : self.shift + self.width]
+        return parts
 
     # -------------------------------------------------------------- exact errors
 
     def pair_sad(
-        self, bank: TemplateBank, vblock: torch.Tensor, t: torch.Tensor, k: torch.Tensor
+        self, bank: TemplateBank, parts: dict, t: torch.Tensor, k: torch.Tensor
     ) -> torch.Tensor:
-        """Exact sums of absolute differences of (template t, offset index k) pairs.
+        """Exact sums of absolute differences of (template ``t``, offset index ``k``) pairs.
 
         Shape:
             t, k: ``(P,)`` -> ``(P,)``.
         """
-        d = self.y_size * self.x_size
-        flat = bank._data.view(-1)
-        per = max(1, CHUNK_ELEMENTS // max(1, self.npix))
-        out = []
-        for s in range(0, t.numel(), per):
-            idx = self._index[k[s : s + per]] + (t[s : s + per] * d)[:, None]
-            out.append((flat.take(idx) - vblock).abs_().sum(1))
-        return torch.cat(out) if out else vblock.new_zeros(0)
+        out = torch.empty(t.numel(), dtype=bank.dtype, device=t.device)
+        if t.numel() == 0:
+            return out
+        per = max(1, CHUNK_ELEMENTS // max(1, self.y_size * self.x_size))
+        if self.panoramic:
+            flat = bank._data.view(bank._capacity, -1)
+            rolled = parts["rolled"]
+            for s in range(0, t.numel(), per):
+                e = s + per
+                rows = flat.index_select(0, t[s:e]) - rolled.index_select(0, k[s:e])
+                out[s:e] = rows.abs_().sum(1)
+            return out
+        block = parts["block"]
+        data = bank._data
+        for kk in torch.unique(k).tolist():  # a few offsets: group pairs by offset
+            sel = (k == kk).nonzero()[:, 0]
+            o = int(self.offsets[kk])
+            for s in range(0, sel.numel(), per):
+                idx = sel[s : s + per]
+                win = data.index_select(0, t.index_select(0, idx))[:, :, o : o + self.width]
+                out[idx] = (win - block).abs_().sum(dim=(1, 2))
+        return out
 
     def errors(
         self, bank: TemplateBank, view: torch.Tensor, ids: torch.Tensor | None = None
@@ -445,54 +495,57 @@ class TemplateMatcher:
         m, kk = ids.numel(), self.n_offsets
         t = ids.repeat_interleave(kk)
         k = torch.arange(kk, device=view.device).repeat(m)
-        return (self.pair_sad(bank, self.view_block(view), t, k) / self.npix).reshape(m, kk)
+        sad = self.pair_sad(bank, self._view_parts(view), t, k)
+        return (sad / self.npix).reshape(m, kk)
 
     # -------------------------------------------------------------- lower bounds
 
-    def _template_bound(self, bank: TemplateBank, view: torch.Tensor) -> torch.Tensor | None:
-        """Offset-independent lower bound (sum units) per template, panoramic only."""
-        if not self.panoramic:
-            return None
-        vrow = view.sum(1)
-        vsort = view.sum(0).sort().values
-        b_rows = (bank.rowsum - vrow).abs().sum(1)
-        b_cols = (bank.colsort - vsort).abs().sum(1)
+    def _template_bound(self, bank: TemplateBank, parts: dict) -> torch.Tensor:
+        """Offset-independent lower bound of the SAD per template (panoramic)."""
+        b_rows = (bank.rowsum - parts["rowsum"]).abs().sum(1)
+        b_cols = (bank.colsort - parts["colsort"]).abs().sum(1)
         return torch.maximum(b_rows, b_cols)
 
-    def _pair_bound(
-        self, bank: TemplateBank, view: torch.Tensor, ids: torch.Tensor
+    def _window_bound(self, bank: TemplateBank, parts: dict) -> torch.Tensor:
+        """Row-group window-sum bound for every template and offset (normal), ``(N, K)``."""
+        gcum = bank.gcum  # (N, G, X+1)
+        lo = self.offsets
+        win = gcum[:, :, lo + self.width] - gcum[:, :, lo]  # (N, G, K)
+        return (win - parts["gsum"][None, :, None]).abs_().sum(1)
+
+    def _profile_bound(
+        self, bank: TemplateBank, parts: dict, t: torch.Tensor, k: torch.Tensor
     ) -> torch.Tensor:
-        """Column-profile lower bound (sum units) for every offset, shape ``(M, K)``."""
-        vcol = view.sum(0)
+        """Column-sum profile bound of (template, offset index) pairs, ``(P,)``."""
+        cs = bank._colsum
         if self.panoramic:
-            # compare rolled view profiles with the template profile (circular)
-            vp = vcol[
-                (torch.arange(self.x_size, device=vcol.device)[None, :] - self.offsets[:, None])
-                % self.x_size
-            ]
-            cs = bank.colsum[ids]
-            return torch.cdist(cs, vp, p=1.0) if cs.numel() else cs.new_zeros(0, self.n_offsets)
-        vb = vcol[self.shift : self.shift + self.width]
-        cs = bank.colsum[ids]
-        per = max(1, CHUNK_ELEMENTS // max(1, self.n_offsets * self.width))
-        out = [
-            (cs[s : s + per][:, self._cols] - vb).abs_().sum(-1) for s in range(0, ids.numel(), per)
-        ]
-        return torch.cat(out) if out else cs.new_zeros(0, self.n_offsets)
+            rows = cs.index_select(0, t) - parts["col_rolled"].index_select(0, k)
+            return rows.abs_().sum(1)
+        rows = torch.gather(cs.index_select(0, t), 1, self._win.index_select(0, k))  # (P, W)
+        return (rows - parts["col_block"]).abs_().sum(1)
 
     # -------------------------------------------------------------------- search
 
     def search(
-        self, bank: TemplateBank, view: torch.Tensor, *, hint: int = -1, prune: bool = True
+        self,
+        bank: TemplateBank,
+        view: torch.Tensor,
+        *,
+        hint: int = -1,
+        prune: bool = True,
+        threshold: float | None = None,
     ) -> tuple[int, int, float]:
-        """The exact best (template id, offset, mean error); (-1, 0, inf) if empty.
+        """The exact best (template id, offset, mean error); ``(-1, 0, inf)`` if empty.
 
         Args:
             bank: the templates.
             view: the view template.
-            hint: a template id likely to match well (e.g. the current one); only speeds
-                the search up.
-            prune: use lower bounds to skip work (False: evaluate every pair).
+            hint: a template id likely to match well (the current one); only speeds up.
+            prune: skip work with the lower bounds (False: evaluate every pair).
+            threshold: when given, the result is exact whenever the best mean error is at
+                most ``threshold``; otherwise ``(-1, 0, e)`` is returned where ``e`` is a
+                lower bound of the best error with ``e > threshold``. Much faster for
+                novel views.
 
         Shape:
             view: ``(Y, X)``.
@@ -500,57 +553,90 @@ class TemplateMatcher:
         n = len(bank)
         if n == 0:
             return -1, 0, math.inf
-        dev = view.device
         kk = self.n_offsets
-        vblock = self.view_block(view)
+        dev = view.device
+        parts = self._view_parts(view)
         if not prune:
             err = self.errors(bank, view).reshape(-1)
             i = int(torch.argmin(err))  # first minimum: lowest id, then lowest offset
-            return i // kk, int(self.offsets[i % kk]), float(err[i])
+            return self._result(i // kk, i % kk, float(err[i]), threshold)
         margin = (1e-5 if view.dtype != torch.float64 else 1e-11) * self.npix
-        best = [math.inf, n, kk]  # sum error, template id, offset index
+        cap = math.inf if threshold is None else threshold * self.npix
+        state = {"best": (math.inf, n, kk), "pruned": math.inf}
+
+        def cut() -> float:
+            return min(state["best"][0], cap) + margin
 
         def evaluate(t: torch.Tensor, k: torch.Tensor) -> None:
             if t.numel() == 0:
                 return
-            sad = self.pair_sad(bank, vblock, t, k)
+            sad = self.pair_sad(bank, parts, t, k)
             m = sad.min()
-            sel = sad == m
-            key = torch.where(sel, t * kk + k, torch.full_like(t, n * kk)).min()
+            key = torch.where(sad == m, t * kk + k, torch.full_like(t, n * kk)).min()
             cand = (float(m), int(key) // kk, int(key) % kk)
-            if (cand[0], cand[1], cand[2]) < (best[0], best[1], best[2]):
-                best[:] = list(cand)
+            state["best"] = min(state["best"], cand)
+
+        def prune_by(bound: torch.Tensor) -> torch.Tensor:
+            keep = bound <= cut()
+            if not bool(keep.all()):
+                state["pruned"] = min(state["pruned"], float(bound[~keep].min()))
+            return keep
 
         all_k = torch.arange(kk, device=dev)
-        tb = self._template_bound(bank, view)
-        # seeds: the hint and the template with the lowest cheap bound, all offsets
-        seeds = [hint] if 0 <= hint < n else []
-        if tb is not None:
-            seeds.append(int(torch.argmin(tb)))
+        if self.panoramic:
+            tb = self._template_bound(bank, parts)  # (N,)
+            seed = int(torch.argmin(tb))
         else:
-            seeds.append(n - 1)
-        seed_t = torch.tensor(sorted(set(seeds)), device=dev)
+            wb = self._window_bound(bank, parts)  # (N, K)
+            seed = int(torch.argmin(wb)) // kk
+        seeds = sorted({seed, hint} if 0 <= hint < n else {seed})
+        seed_t = torch.tensor(seeds, device=dev)
         evaluate(seed_t.repeat_interleave(kk), all_k.repeat(seed_t.numel()))
-        ids = torch.arange(n, device=dev)
-        if tb is not None:
-            ids = ids[tb <= best[0] + margin]
-        pb = self._pair_bound(bank, view, ids)  # (M, K)
-        if tb is not None:
-            pb = torch.maximum(pb, tb[ids][:, None])
-        keep = (pb <= best[0] + margin).nonzero()
-        if keep.numel():
-            lb = pb[keep[:, 0], keep[:, 1]]
+        if self.panoramic:
+            ids = prune_by(tb).nonzero()[:, 0]
+            t = ids.repeat_interleave(kk)
+            k = all_k.repeat(ids.numel())
+            lb = tb[t]
+        else:
+            keep = prune_by(wb).nonzero()
+            t, k = keep[:, 0], keep[:, 1]
+            lb = wb[t, k]
+        if t.numel():
+            lb = torch.maximum(lb, self._profile_bound(bank, parts, t, k))
+            keep = prune_by(lb)
+            lb, t, k = lb[keep], t[keep], k[keep]
+        if t.numel():
             order = torch.argsort(lb, stable=True)
-            lb, t, k = lb[order], ids[keep[order, 0]], keep[order, 1]
+            lb, t, k = lb[order], t[order], k[order]
+            lb_host = lb.tolist() if lb.numel() <= 4096 else None
+            s, size = 0, 16
             per = max(64, CHUNK_ELEMENTS // max(1, self.npix))
-            s = 0
-            while s < lb.numel() and float(lb[s]) <= best[0] + margin:
-                e = s + per
-                # within a chunk, skip pairs the running best already excludes
-                ok = lb[s:e] <= best[0] + margin
+            while s < t.numel():
+                first = lb_host[s] if lb_host is not None else float(lb[s])
+                if first > cut():
+                    state["pruned"] = min(state["pruned"], first)
+                    break
+                e = min(s + size, t.numel())
+                ok = prune_by(lb[s:e])
                 evaluate(t[s:e][ok], k[s:e][ok])
-                s = e
-        return best[1], int(self.offsets[best[2]]), best[0] / self.npix
+                s, size = e, min(size * 2, per)
+        best, tid, ki = state["best"]
+        if threshold is not None and best > cap:
+            low = min(best, state["pruned"])
+            return -1, 0, low / self.npix
+        return tid, int(self.offsets[ki]), best / self.npix
+
+    def _result(
+        self, tid: int, ki: int, err: float, threshold: float | None
+    ) -> tuple[int, int, float]:
+        if threshold is not None and err > threshold:
+            return -1, 0, err
+        return tid, int(self.offsets[ki]), err
+
+
+def _row_groups(x: torch.Tensor, groups: int = 4) -> list[torch.Tensor]:
+    """Split the rows (dim -2) into ``min(groups, rows)`` nearly equal groups."""
+    return list(torch.tensor_split(x, min(groups, x.shape[-2]), dim=-2))
 
 
 # --------------------------------------------------------------------- the modules
@@ -568,6 +654,7 @@ class _TemplateView:
         dtype: torch.dtype = torch.float32,
         device: torch.device | str | None = None,
         prune: bool = True,
+        exact_errors: bool = False,
     ) -> None:
         if not isinstance(params, LocalViewParams):
             raise ConfigError(f"expected LocalViewParams, got {type(params).__name__}")
@@ -577,6 +664,7 @@ class _TemplateView:
         self.dtype = dtype
         self.device = torch.device(device) if device is not None else torch.device("cpu")
         self.prune = prune
+        self.exact_errors = exact_errors
         self.bank: TemplateBank | None = None
         self.matcher: TemplateMatcher | None = None
         self.current_id = -1
@@ -640,10 +728,17 @@ class _TemplateView:
         return t
 
     # -- matching
-    def match(self, template: Any) -> tuple[int, int, float]:
+    def match(self, template: Any, *, threshold: float | None = None) -> tuple[int, int, float]:
         """Best (template id, offset, mean error) for a preprocessed template; no learning.
 
-        Returns ``(-1, 0, inf)`` when the bank is empty.
+        Exactly what a brute-force loop over all templates and offsets returns (ties: the
+        lowest id, then the lowest offset); ``(-1, 0, inf)`` when the bank is empty.
+
+        Args:
+            template: the view template.
+            threshold: if given and the best error is above it, return ``(-1, 0, e)``
+                with ``e`` a lower bound (> threshold) of the best error; faster for
+                novel views. At or below the threshold the result is exact.
 
         Shape:
             template: ``(Y, X)``.
@@ -651,7 +746,9 @@ class _TemplateView:
         t = self._check_template(template)
         if self.bank is None or len(self.bank) == 0:
             return -1, 0, math.inf
-        return self.matcher.search(self.bank, t, hint=self.current_id, prune=self.prune)
+        return self.matcher.search(
+            self.bank, t, hint=self.current_id, prune=self.prune, threshold=threshold
+        )
 
     def errors(self, template: Any, ids: Any = None) -> torch.Tensor:
         """Exact mean absolute error of the template against templates at every offset.
@@ -683,7 +780,8 @@ class _TemplateView:
         frame = self.frame_counter if frame_index is None else int(frame_index)
         view = self._to_template(observation)
         self.frame_counter += 1
-        tid, offset, err = self.match(view)
+        threshold = None if self.exact_errors else self.params.vt_match_threshold
+        tid, offset, err = self.match(view, threshold=threshold)
         self.previous_id = self.current_id
         if tid >= 0 and err <= self.params.vt_match_threshold:
             self.current_id = tid
@@ -779,6 +877,9 @@ class LocalView(_TemplateView):
         dtype: template dtype (float32 or float64).
         device: template device.
         prune: skip work with exact lower bounds (False: evaluate every pair; same result).
+        exact_errors: report the exact best error of novel views too (slower); by
+            default a new template's ``ViewMatch.error`` is a lower bound (above
+            ``vt_match_threshold``) of the best error, the decision being the same.
 
     Example:
         >>> lv = LocalView(LocalViewParams(template_x_size=8, template_y_size=4))
@@ -795,8 +896,9 @@ class LocalView(_TemplateView):
         dtype: torch.dtype = torch.float32,
         device: torch.device | str | None = None,
         prune: bool = True,
+        exact_errors: bool = False,
     ) -> None:
-        super().__init__(params, dtype=dtype, device=device, prune=prune)
+        super().__init__(params, dtype=dtype, device=device, prune=prune, exact_errors=exact_errors)
         self._setup(params.template_y_size, params.template_x_size)
 
     def preprocess(self, image: Any) -> torch.Tensor:
@@ -839,6 +941,7 @@ class FeatureView(_TemplateView):
             (None: ``frame.image``).
         scale: multiply features by this before matching.
         prune: skip work with exact lower bounds.
+        exact_errors: report the exact best error of novel views too (slower).
     """
 
     kind = "features"
@@ -852,8 +955,9 @@ class FeatureView(_TemplateView):
         key: str | None = None,
         scale: float = 1.0,
         prune: bool = True,
+        exact_errors: bool = False,
     ) -> None:
-        super().__init__(params, dtype=dtype, device=device, prune=prune)
+        super().__init__(params, dtype=dtype, device=device, prune=prune, exact_errors=exact_errors)
         if not math.isfinite(scale) or scale <= 0:
             raise ConfigError(f"scale must be a positive finite number, got {scale}")
         self.key, self.scale = key, float(scale)

@@ -340,11 +340,14 @@ class MBARAM:
         log_smax = {k: math.log(self.params.s_max) for k in names}
         if "odometry" in log_smax:
             log_smax["odometry"] = math.log(self.params.s_max_odometry)
-        floor = self.params.var_floor
         for k in names:
             ch = self._ch[k]
             d = ch.diff(x[k], n)  # (n, D)
-            q = ch.maha(d, n)
+            if ch.full:
+                q = ch.maha(d, n)
+            else:
+                r = d.square_().div_(ch.cov[:n])  # (x - mu)^2 / sigma^2 per dimension
+                q = r.sum(-1)
             logp = -0.5 * (ch.dim * _LOG_2PI + ch.logdet[:n] + q)  # Eq. 5
             joint = logp + logprior
             logpost = joint - torch.logsumexp(joint, 0)  # Eqs. 1, 4
@@ -355,8 +358,9 @@ class MBARAM:
                 # det(a Sigma + b d'd'^T), d' = a d: matrix determinant lemma (Eq. 10)
                 logs = ch.dim * a.log() + ch.logdet[:n] + torch.log1p(a * b * q)
             else:
-                var = a[:, None] * ch.cov[:n] + b[:, None] * (a[:, None] * d).square()  # Eq. 10
-                logs = var.clamp_min(floor).log().sum(-1)  # Eq. 8
+                # Eq. 10 per dimension: a s2 + b (a d)^2 = a s2 (1 + a b d^2 / s2), so
+                # log S' = D log a + log S + sum log1p(a b r)  (Eq. 8)
+                logs = ch.dim * a.log() + ch.logdet[:n] + r.mul_((a * b)[:, None]).log1p_().sum(-1)
             passed &= logs <= log_smax[k]  # Eq. 7
         log_m = torch.logsumexp(torch.stack(log_terms), 0)  # Eq. 3 in log space
         return log_m, passed

@@ -32,7 +32,14 @@ from typing import Any
 import numpy as np
 
 from graph.errors import GraphError
-from torchratslam.state import INT_FIELDS, PER_ENTITY, MapState, check_compatible
+from torchratslam.state import (
+    EM_ACCUM,
+    INT_FIELDS,
+    PC_BEST,
+    PER_ENTITY,
+    MapState,
+    check_compatible,
+)
 
 __all__ = ["MergeResult", "merge_maps", "pc_distance", "pick_experience", "shift_activity"]
 
@@ -248,6 +255,16 @@ def merge_maps(
             extra[key] = cat(a, b[keep_of[prefix]])
         elif key in partial.extra:
             extra[key] = np.array(partial.extra[key], copy=True)
+    # the session's running values move with the robot into the loaded map
+    if EM_ACCUM in extra:  # [x, y, facing, time] accumulated in the partial map's frame
+        acc = np.array(extra[EM_ACCUM], np.float64, copy=True)
+        acc[:2] = rigid_transform(acc[:2], dth, 0.0, 0.0)
+        acc[2] = float(_wrap(acc[2] + dth))
+        extra[EM_ACCUM] = acc
+    if PC_BEST in extra:  # the decoded packet centre moves with the activity roll
+        src = partial.template_pc[z]
+        roll = np.rint(src + delta) - np.rint(src)
+        extra[PC_BEST] = np.mod(np.asarray(extra[PC_BEST], np.float64) + roll, dims)
     ids = {k: int(getattr(partial, k)) for k in INT_FIELDS}
     ids["current_vt"] = int(_apply(tmap, ids["current_vt"]))
     ids["prev_vt"] = int(_apply(tmap, ids["prev_vt"]))

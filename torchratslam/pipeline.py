@@ -193,7 +193,9 @@ class RatSLAM:
     Args:
         config: all module parameters.
         local_view, pose_cells, experience_map, odometry: a registered name, a class
-            (called like the registry's factory) or a ready instance.
+            (called like the registry's factory) or a ready instance; None takes the
+            name from the config's ``general`` section when it has such a key, else
+            ``"ratslam"`` (``"given"`` for the odometry).
         dtype, device: for the torch modules (local view, pose cells).
         pipelined: default mode of :meth:`run` (one worker thread per module).
 
@@ -201,24 +203,34 @@ class RatSLAM:
         config, local_view, pose_cells, experience_map, odometry: the modules.
         frame_index: frames processed so far.
         timings: the :class:`~torchratslam.timing.TimeLogger` (per-frame ms per module).
-        history: per processed frame ``(frame, t, experience_id)`` plus the ground-truth
-            pose when the frame had one (see :meth:`trajectory`).
+
+    The per-frame history (frame, time, current experience, ground truth, odometry) is
+    kept for :meth:`trajectory`, :meth:`ate` and :meth:`dead_reckoning_ate`.
     """
 
     def __init__(
         self,
         config: RatSLAMConfig | None = None,
         *,
-        local_view: Any = "ratslam",
-        pose_cells: Any = "ratslam",
-        experience_map: Any = "ratslam",
-        odometry: Any = "given",
+        local_view: Any = None,
+        pose_cells: Any = None,
+        experience_map: Any = None,
+        odometry: Any = None,
         dtype: torch.dtype = torch.float32,
         device: torch.device | str | None = None,
         pipelined: bool = False,
     ) -> None:
         _load_default_modules()
         self.config = config if config is not None else RatSLAMConfig()
+        general = self.config.general
+        if local_view is None:
+            local_view = getattr(general, "local_view", "ratslam")
+        if pose_cells is None:
+            pose_cells = getattr(general, "pose_cells", "ratslam")
+        if experience_map is None:
+            experience_map = getattr(general, "experience_map", "ratslam")
+        if odometry is None:
+            odometry = getattr(general, "odometry", "given")
         self.dtype, self.device = dtype, device
         self.pipelined = pipelined
         self.local_view = _build(
@@ -473,8 +485,12 @@ class RatSLAM:
                         return _STOP
 
         start = self.frame_index
+        # OpenMP's thread count is per thread: give the workers the caller's setting
+        # (else each worker's torch ops would use every core and oversubscribe)
+        n_threads = torch.get_num_threads()
 
         def view_worker() -> None:
+            torch.set_num_threads(n_threads)
             try:
                 for i, frame in enumerate(frames):
                     if stop.is_set():
@@ -488,6 +504,7 @@ class RatSLAM:
                 put(q_view, _STOP)
 
         def pc_worker() -> None:
+            torch.set_num_threads(n_threads)
             try:
                 while (item := get(q_view)) is not _STOP:
                     frame, index, odo, view = item
@@ -500,6 +517,7 @@ class RatSLAM:
                 put(q_pc, _STOP)
 
         def em_worker() -> None:
+            torch.set_num_threads(n_threads)
             try:
                 while (item := get(q_pc)) is not _STOP:
                     frame, index, odo, view, action, pc = item
@@ -601,6 +619,19 @@ class RatSLAM:
             return None
         dr = dead_reckoning(odo[:, 0], odo[:, 1], odo[:, 2])
         return ate_rmse(dr[:, :2], gt[:, :2])
+
+    def remap_experiences(self, old_to_new: np.ndarray) -> None:
+        """Re-point the per-frame history at new experience ids (after a map merge).
+
+        Args:
+            old_to_new: ``old_to_new[i]`` is the new id of experience ``i`` (-1: dropped;
+                ids beyond its length are kept). Shape: ``(M,)``.
+        """
+        ids = np.asarray(old_to_new, dtype=np.int64).reshape(-1)
+        old = np.asarray(self._exp, dtype=np.int64)
+        ok = (old >= 0) & (old < ids.size)
+        new = np.where(ok, ids[np.where(ok, old, 0)], old)
+        self._exp[:] = [int(v) for v in new]
 
     def reset_history(self) -> None:
         """Forget the per-frame history and timings (the map is kept)."""

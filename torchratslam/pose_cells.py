@@ -146,13 +146,16 @@ def _minimal_arcs(occ: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return best.astype(np.int64), length.astype(np.int64)
 
 
-def _as_batch(value: Any, batch: int, dtype: torch.dtype, device: Any, name: str) -> torch.Tensor:
-    t = torch.as_tensor(value, dtype=dtype, device=device)
-    if t.ndim == 0:
-        return t.expand(batch)
-    if t.shape != (batch,):
-        raise InputError(f"{name} must be a scalar or have shape ({batch},), got {tuple(t.shape)}")
-    return t
+def _as_batch(value: Any, batch: int, name: str, dtype: Any = np.float64) -> np.ndarray:
+    """A scalar or ``(batch,)`` value as a ``(batch,)`` numpy array."""
+    if isinstance(value, torch.Tensor):
+        value = value.detach().cpu().numpy()
+    arr = np.asarray(value, dtype=dtype)
+    if arr.ndim == 0:
+        return np.full(batch, arr, dtype=dtype)
+    if arr.shape != (batch,):
+        raise InputError(f"{name} must be a scalar or have shape ({batch},), got {arr.shape}")
+    return arr
 
 
 class PoseCellNetwork(nn.Module):
@@ -164,6 +167,8 @@ class PoseCellNetwork(nn.Module):
         dtype: float32 (default) or float64.
         device: torch device.
         method: ``"crop"`` (default), ``"separable"`` or ``"conv3d"`` (module docstring).
+        crop_fraction: ``"crop"`` falls back to the whole network (separable) in a step
+            whose box holds more than this fraction of the cells.
 
     Attributes:
         activity: buffer ``(B, TH, Y, X)``, non-negative, each network summing to 1.
@@ -186,6 +191,7 @@ class PoseCellNetwork(nn.Module):
         dtype: torch.dtype = torch.float32,
         device: Any = None,
         method: str = "crop",
+        crop_fraction: float = 0.5,
     ) -> None:
         super().__init__()
         if not isinstance(params, PoseCellParams):
@@ -199,6 +205,7 @@ class PoseCellNetwork(nn.Module):
         self.params = params
         self.batch_size = int(batch_size)
         self.method = method
+        self.crop_fraction = float(crop_fraction)
         xy, th = params.pc_dim_xy, params.pc_dim_th
         self.dims = (xy, xy, th)
         self._ke = gaussian_kernel_1d(params.pc_w_e_dim, params.pc_w_e_var)
@@ -247,7 +254,8 @@ class PoseCellNetwork(nn.Module):
         """
         if recompute:
             with torch.no_grad():
-                self._best = self._decode(self.activity)
+                peak = torch.argmax(self.activity.reshape(self.batch_size, -1), dim=1)
+                self._best = self._decode(peak)
         return self._best.clone()
 
     # -------------------------------------------------------------- kernels
@@ -280,7 +288,7 @@ class PoseCellNetwork(nn.Module):
         )
         k3 = (k1[:, None, None] * k1[None, :, None] * k1[None, None, :])[None, None]
         h = dim // 2
-        lo, hi = h, dim - 1 - h  # taps before/after the centre: pad (after, before) for conv
+        lo, hi = h, dim - 1 - h  # taps before/after the centre
         if max(lo, hi) > min(a.shape[1:]):
             raise ConfigError(
                 f"method 'conv3d' needs kernel halves <= the network dims {self.dims}; "
@@ -288,7 +296,7 @@ class PoseCellNetwork(nn.Module):
             )
         # F.conv3d is a correlation: flip the kernel so this is OpenRatSLAM's scatter.
         k3 = torch.flip(k3, dims=(2, 3, 4))
-        pad = (lo, hi, lo, hi, lo, hi)
+        pad = (hi, lo, hi, lo, hi, lo)  # flipped kernel: the larger side pads first
         v = a.unsqueeze(1)
         v = torch.nn.functional.pad(v, pad, mode="circular")
         return torch.nn.functional.conv3d(v, k3).squeeze(1)
@@ -313,6 +321,26 @@ class PoseCellNetwork(nn.Module):
             return excited - self._conv3d(excited, "i")
         return excited - self._conv_sep(excited, "i", (True, True, True))
 
+    def path_integrate(self, activity: torch.Tensor, trans: Any, rot: Any) -> torch.Tensor:
+        """Path integration alone (no state change): every theta layer ``k`` moves
+        ``trans`` cells along heading ``k 2 pi / TH`` (backwards when negative), bilinear
+        with wrap; then the layers move ``rot`` cells in theta (linear interpolation).
+
+        Args:
+            activity: the activity to move.
+            trans: translation in cells (``vtrans * dt / pc_cell_x_size``).
+            rot: rotation in theta cells (``vrot * dt / (2 pi / TH)``).
+
+        Shape:
+            activity: ``(B, TH, Y, X)``; trans, rot: scalars or ``(B,)``.
+        """
+        b = activity.shape[0]
+        t = _as_batch(trans, b, "trans")
+        r = _as_batch(rot, b, "rot")
+        with torch.no_grad():
+            a = self._translate(activity, t, np.zeros(b, dtype=np.int64))
+            return self._rotate(a, r)
+
     # ----------------------------------------------------------------- step
     def step(self, vtrans: Any, vrot: Any, dt: Any = 1.0) -> torch.Tensor:
         """One OpenRatSLAM ``on_odo``: dynamics, path integration, packet centre.
@@ -333,26 +361,30 @@ class PoseCellNetwork(nn.Module):
                 out (every cell at or below ``pc_global_inhib``).
         """
         b = self.batch_size
-        f64 = torch.float64
-        vt = _as_batch(vtrans, b, f64, "cpu", "vtrans")
-        vr = _as_batch(vrot, b, f64, "cpu", "vrot")
-        d = _as_batch(dt, b, f64, "cpu", "dt")
-        if not (torch.isfinite(vt).all() and torch.isfinite(vr).all() and torch.isfinite(d).all()):
+        vt = _as_batch(vtrans, b, "vtrans")
+        vr = _as_batch(vrot, b, "vrot")
+        d = _as_batch(dt, b, "dt")
+        if not (np.isfinite(vt).all() and np.isfinite(vr).all() and np.isfinite(d).all()):
             raise InputError(f"odometry must be finite, got vtrans={vtrans}, vrot={vrot}, dt={dt}")
-        trans = vt * d / self.params.pc_cell_x_size  # cells along the layer's heading
+        trans = vt * d / self.params.pc_cell_x_size  # cells along each layer's heading
         rot = vr * d / (2.0 * math.pi / self.dims[2])  # theta cells
         with torch.no_grad():
             if self.method == "crop":
-                self._step_crop(trans, rot)
+                peak = self._step_crop(trans, rot)
             else:
-                a = self.inhibit(self.excite(self.activity))
-                a = self._finish_dynamics(a)
-                a = self._translate(a, trans, 0)
-                a = self._rotate(a, rot)
-                self.activity.copy_(a)
-                self._occ = None
-            self._best = self._decode(self.activity)
+                peak = self._step_full(trans, rot)
+            self._best = self._decode(peak)
         return self._best.clone()
+
+    def _step_full(self, trans: np.ndarray, rot: np.ndarray) -> torch.Tensor:
+        a = self.inhibit(self.excite(self.activity))
+        a = self._finish_dynamics(a)
+        a = self._translate(a, trans, np.zeros(self.batch_size, dtype=np.int64))
+        a = self._rotate(a, rot)
+        self.activity.copy_(a)
+        self._occ = None
+        self.last_crop = tuple(self.activity.shape[1:])
+        return torch.argmax(self.activity.reshape(self.batch_size, -1), dim=1)
 
     def _finish_dynamics(self, a: torch.Tensor) -> torch.Tensor:
         a = torch.clamp_min(a - self.params.pc_global_inhib, 0.0)
@@ -364,66 +396,57 @@ class PoseCellNetwork(nn.Module):
             )
         return a / total
 
-    def _layer_shifts(
-        self, trans: torch.Tensor, th_start: torch.Tensor, th_len: int
-    ) -> tuple[torch.Tensor, torch.Tensor]:
-        """(sx, sy) shifts in cells ``(B, L)`` of the theta layers ``th_start + 0..L-1``."""
-        n_th = self.dims[2]
-        k = (th_start[:, None] + torch.arange(th_len, dtype=torch.int64)[None, :]) % n_th
-        direction = k.to(torch.float64) * (2.0 * math.pi / n_th)
-        direction = direction + torch.where(trans < 0, math.pi, 0.0)[:, None]
-        mag = trans.abs()[:, None]
-        return mag * torch.cos(direction), mag * torch.sin(direction)
+    def _shift_axis(self, a: torch.Tensor, shift: np.ndarray, axis: int) -> torch.Tensor:
+        """Move the content of ``a`` by ``shift`` cells along ``axis``, wrapping on the
+        tensor's own length: integer part by a gather, fraction by linear weights.
 
-    def _shift_axis(self, a: torch.Tensor, shift: torch.Tensor, axis: int) -> torch.Tensor:
-        """Move content of ``a`` by ``shift`` cells along ``axis`` (wrapping on the
-        tensor's own length): integer part as a gather, fraction by linear weights.
-
-        ``shift`` broadcasts against ``a`` except along ``axis`` (size 1 there).
+        ``shift`` is ``(B,)`` (theta) or ``(B, T)`` (one shift per theta layer).
         """
         n = a.shape[axis]
-        fl = torch.floor(shift)
-        frac = (shift - fl).to(a.dtype)
+        fl = np.floor(shift)
+        frac = shift - fl
         shape = [1, 1, 1, 1]
         shape[axis] = n
-        pos = torch.arange(n, dtype=torch.int64).view(shape)
-        idx = torch.remainder(pos - fl.to(torch.int64), n).to(a.device)
-        target = list(a.shape)
-        g = torch.gather(a, axis, idx.expand(target))
-        frac = frac.to(a.device)
-        return (1.0 - frac) * g + frac * torch.roll(g, 1, dims=axis)
+        lead = shift.shape + (1,) * (4 - shift.ndim)
+        idx = np.remainder(np.arange(n).reshape(shape) - fl.astype(np.int64).reshape(lead), n)
+        idx_t = torch.from_numpy(idx).to(a.device).expand(a.shape)
+        w = torch.from_numpy(frac.reshape(lead)).to(device=a.device, dtype=a.dtype)
+        g = torch.gather(a, axis, idx_t)
+        return g + w * (torch.roll(g, 1, dims=axis) - g)
 
-    def _translate(self, a: torch.Tensor, trans: torch.Tensor, th_start: Any) -> torch.Tensor:
-        if not bool((trans != 0).any()):
+    def _translate(self, a: torch.Tensor, trans: np.ndarray, th_start: np.ndarray) -> torch.Tensor:
+        """Shift every theta layer along its heading (layer ``k`` of ``a`` is global layer
+        ``th_start + k``) by ``trans`` cells (negative: backwards)."""
+        if not trans.any():
             return a
-        b, t = a.shape[:2]
-        start = torch.as_tensor(th_start, dtype=torch.int64).expand(b)
-        sx, sy = self._layer_shifts(trans, start, t)
-        a = self._shift_axis(a, sx.view(b, t, 1, 1), 3)
-        return self._shift_axis(a, sy.view(b, t, 1, 1), 2)
+        n_th = self.dims[2]
+        k = (th_start[:, None] + np.arange(a.shape[1])[None, :]) % n_th
+        direction = k * (2.0 * math.pi / n_th) + np.where(trans < 0, math.pi, 0.0)[:, None]
+        mag = np.abs(trans)[:, None]
+        a = self._shift_axis(a, mag * np.cos(direction), 3)
+        return self._shift_axis(a, mag * np.sin(direction), 2)
 
-    def _rotate(self, a: torch.Tensor, rot: torch.Tensor) -> torch.Tensor:
-        if not bool((rot != 0).any()):
+    def _rotate(self, a: torch.Tensor, rot: np.ndarray) -> torch.Tensor:
+        if not rot.any():
             return a
-        return self._shift_axis(a, rot.view(-1, 1, 1, 1), 1)
+        return self._shift_axis(a, rot, 1)
 
     def _occupancy(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Which theta / y / x indices hold non-zero activity, ``(B, n)`` each (cached
+        between steps while nobody else writes into the buffer)."""
         key = (self.activity.data_ptr(), self.activity._version)
         if self._occ is None or self._occ_key != key:
-            nz = self.activity != 0
-            occ_t = nz.any(dim=3).any(dim=2).cpu().numpy()
-            occ_y = nz.any(dim=3).any(dim=1).cpu().numpy()
-            occ_x = nz.any(dim=2).any(dim=1).cpu().numpy()
-            self._occ = (occ_t, occ_y, occ_x)
+            nz = (self.activity != 0).cpu().numpy()
+            self._occ = (nz.any(axis=(2, 3)), nz.any(axis=(1, 3)), nz.any(axis=(1, 2)))
             self._occ_key = key
         return self._occ
 
-    def _step_crop(self, trans: torch.Tensor, rot: torch.Tensor) -> None:
+    def _step_crop(self, trans: np.ndarray, rot: np.ndarray) -> torch.Tensor:
         b = self.batch_size
-        n_t, n_y, n_x = self.dims[2], self.dims[1], self.dims[0]
+        n_x, n_y, n_t = self.dims
         occ = self._occupancy()
-        move_xy = math.ceil(float(trans.abs().max())) + 1 if bool((trans != 0).any()) else 0
-        move_th = math.ceil(float(rot.abs().max())) + 1 if bool((rot != 0).any()) else 0
+        move_xy = math.ceil(float(np.abs(trans).max())) + 1 if trans.any() else 0
+        move_th = math.ceil(float(np.abs(rot).max())) + 1 if rot.any() else 0
         margins = (self._reach + move_th, self._reach + move_xy, self._reach + move_xy)
         starts, lengths, circ = [], [], []
         for o, n, m in zip(occ, (n_t, n_y, n_x), margins, strict=True):
@@ -442,90 +465,75 @@ class PoseCellNetwork(nn.Module):
                 lengths.append(length)
                 circ.append(False)
         lt, ly, lx = lengths
+        if lt * ly * lx > self.crop_fraction * n_t * n_y * n_x:
+            return self._step_full(trans, rot)
         self.last_crop = (lt, ly, lx)
-        if all(circ):
-            a = self.inhibit_sep(
-                self._conv_sep(self.activity, "e", (True, True, True)), (True,) * 3
-            )
-            a = self._finish_dynamics(a)
-            a = self._translate(a, trans, 0)
-            a = self._rotate(a, rot)
-            self.activity.copy_(a)
-            nz = a != 0
-            self._occ = (
-                nz.any(dim=3).any(dim=2).cpu().numpy(),
-                nz.any(dim=3).any(dim=1).cpu().numpy(),
-                nz.any(dim=2).any(dim=1).cpu().numpy(),
-            )
-            self._occ_key = (self.activity.data_ptr(), self.activity._version)
-            return
-        idx = []
-        for s, ln, n in zip(starts, lengths, (n_t, n_y, n_x), strict=True):
-            idx.append(torch.as_tensor((s[:, None] + np.arange(ln)[None, :]) % n))
+        idx = [
+            np.remainder(s[:, None] + np.arange(ln)[None, :], n)
+            for s, ln, n in zip(starts, lengths, (n_t, n_y, n_x), strict=True)
+        ]
         it, iy, ix = idx
-        flat = (
+        flat_np = (
             it[:, :, None, None] * (n_y * n_x) + iy[:, None, :, None] * n_x + ix[:, None, None, :]
         )
-        flat = flat.reshape(b, -1).to(self.device)
+        flat = torch.from_numpy(flat_np.reshape(b, -1)).to(self.device)
         act = self.activity.view(b, -1)
         crop = torch.gather(act, 1, flat).view(b, lt, ly, lx)
         ctup = (circ[0], circ[1], circ[2])
         e = self._conv_sep(crop, "e", ctup)
-        a = self.inhibit_sep(e, ctup)
+        a = e - self._conv_sep(e, "i", ctup)
         a = self._finish_dynamics(a)
-        a = self._translate(a, trans, torch.as_tensor(starts[0]))
+        a = self._translate(a, trans, starts[0])
         a = self._rotate(a, rot)
-        act.scatter_(1, flat, a.reshape(b, -1))
-        # occupancy of the new activity, from the crop (everything else is zero)
-        nz = a != 0
+        a = a.reshape(b, -1)
+        act.scatter_(1, flat, a)
+        # the new occupancy, from the crop (every other cell is zero)
+        nz = (a != 0).cpu().numpy().reshape(b, lt, ly, lx)
         new_occ = []
-        for axis_i, (keep, n) in enumerate(
+        for axis_i, (axes, n) in enumerate(
             zip(((2, 3), (1, 3), (1, 2)), (n_t, n_y, n_x), strict=True)
         ):
-            o_c = nz.any(dim=keep[1]).any(dim=keep[0]).cpu().numpy()
             o = np.zeros((b, n), dtype=bool)
-            np.put_along_axis(o, idx[axis_i].numpy(), o_c, axis=1)
+            np.put_along_axis(o, idx[axis_i], nz.any(axis=axes), axis=1)
             new_occ.append(o)
         self._occ = (new_occ[0], new_occ[1], new_occ[2])
         self._occ_key = (self.activity.data_ptr(), self.activity._version)
-
-    def inhibit_sep(self, excited: torch.Tensor, circ: tuple[bool, bool, bool]) -> torch.Tensor:
-        """Inhibition with the separable kernel; ``circ`` per axis (th, y, x) wraps."""
-        return excited - self._conv_sep(excited, "i", circ)
+        # the most active cell; ties go to the lowest (th, y, x) index as in a full scan
+        top = a.amax(dim=1, keepdim=True)
+        return torch.where(a == top, flat, n_t * n_y * n_x).amin(dim=1)
 
     # --------------------------------------------------------------- decode
-    def _decode(self, activity: torch.Tensor) -> torch.Tensor:
-        """Population-vector centre of the cube around the most active cell."""
-        b = activity.shape[0]
+    def _decode(self, peak: torch.Tensor) -> torch.Tensor:
+        """Population-vector centre of the cube of ``+-pc_cells_to_avg`` cells around
+        the most active cell (flat index ``peak``, one per network), with wrap."""
+        b = self.batch_size
         n_x, n_y, n_t = self.dims
-        flat_act = activity.reshape(b, -1)
-        peak = torch.argmax(flat_act, dim=1)  # first maximum in (th, y, x) order
-        pt = peak // (n_y * n_x)
-        py = (peak // n_x) % n_y
-        px = peak % n_x
+        pk = peak.cpu().numpy()
+        pt, py, px = pk // (n_y * n_x), (pk // n_x) % n_y, pk % n_x
         c = self.params.pc_cells_to_avg
-        off = torch.arange(-c, c + 1, dtype=torch.int64, device=activity.device)
-        it = torch.remainder(pt[:, None] + off, n_t)
-        iy = torch.remainder(py[:, None] + off, n_y)
-        ix = torch.remainder(px[:, None] + off, n_x)
+        off = np.arange(-c, c + 1)
+        it = np.remainder(pt[:, None] + off, n_t)
+        iy = np.remainder(py[:, None] + off, n_y)
+        ix = np.remainder(px[:, None] + off, n_x)
         flat = (
             it[:, :, None, None] * (n_y * n_x) + iy[:, None, :, None] * n_x + ix[:, None, None, :]
         )
-        cube = torch.gather(flat_act, 1, flat.reshape(b, -1)).view(
-            b, 2 * c + 1, 2 * c + 1, 2 * c + 1
-        )
-        cube = cube.to(torch.float64)
-        out = []
-        for sums, index, n in (
-            (cube.sum(dim=(1, 2)), ix, n_x),
-            (cube.sum(dim=(1, 3)), iy, n_y),
-            (cube.sum(dim=(2, 3)), it, n_t),
+        index = torch.from_numpy(flat.reshape(b, -1)).to(self.device)
+        cube = torch.gather(self.activity.reshape(b, -1), 1, index).cpu().numpy()
+        cube = cube.astype(np.float64).reshape(b, 2 * c + 1, 2 * c + 1, 2 * c + 1)
+        out = np.empty((b, 3), dtype=np.float64)
+        for col, (sums, ring, n) in enumerate(
+            (
+                (cube.sum(axis=(1, 2)), ix, n_x),
+                (cube.sum(axis=(1, 3)), iy, n_y),
+                (cube.sum(axis=(2, 3)), it, n_t),
+            )
         ):
-            ang = index.to(torch.float64) * (2.0 * math.pi / n)
-            v = torch.atan2((sums * torch.sin(ang)).sum(1), (sums * torch.cos(ang)).sum(1))
-            pos = torch.remainder(v * (n / (2.0 * math.pi)), float(n))
-            out.append(torch.where(pos >= n, pos - n, pos))
-        return torch.stack(out, dim=1).cpu()
+            ang = ring * (2.0 * math.pi / n)
+            v = np.arctan2((sums * np.sin(ang)).sum(1), (sums * np.cos(ang)).sum(1))
+            pos = np.remainder(v * (n / (2.0 * math.pi)), float(n))
+            out[:, col] = np.where(pos >= n, pos - n, pos)
+        return torch.from_numpy(out)
 
     # --------------------------------------------------------------- inject
     def inject(self, x: Any, y: Any, th: Any, energy: Any) -> None:
@@ -540,24 +548,24 @@ class PoseCellNetwork(nn.Module):
         """
         b = self.batch_size
         n_x, n_y, n_t = self.dims
-        ix = torch.remainder(_as_batch(x, b, torch.int64, "cpu", "x"), n_x)
-        iy = torch.remainder(_as_batch(y, b, torch.int64, "cpu", "y"), n_y)
-        it = torch.remainder(_as_batch(th, b, torch.int64, "cpu", "th"), n_t)
-        e = _as_batch(energy, b, self.dtype, "cpu", "energy")
-        if not bool(torch.isfinite(e).all()):
+        ix = np.remainder(_as_batch(x, b, "x", np.int64), n_x)
+        iy = np.remainder(_as_batch(y, b, "y", np.int64), n_y)
+        it = np.remainder(_as_batch(th, b, "th", np.int64), n_t)
+        e = _as_batch(energy, b, "energy")
+        if not np.isfinite(e).all():
             raise InputError(f"injected energy must be finite, got {energy}")
         occ = self._occupancy() if self.method == "crop" else None
+        dev = self.device
         with torch.no_grad():
-            bi = torch.arange(b)
-            dev = self.device
-            self.activity.index_put_(
-                (bi.to(dev), it.to(dev), iy.to(dev), ix.to(dev)), e.to(dev), accumulate=True
-            )
+            index = tuple(torch.from_numpy(v).to(dev) for v in (np.arange(b), it, iy, ix))
+            values = torch.from_numpy(e).to(device=dev, dtype=self.dtype)
+            self.activity.index_put_(index, values, accumulate=True)
         if occ is not None:
-            nz = (e != 0).numpy()
-            occ[0][np.arange(b)[nz], it.numpy()[nz]] = True
-            occ[1][np.arange(b)[nz], iy.numpy()[nz]] = True
-            occ[2][np.arange(b)[nz], ix.numpy()[nz]] = True
+            on = e != 0
+            rows = np.arange(b)[on]
+            occ[0][rows, it[on]] = True
+            occ[1][rows, iy[on]] = True
+            occ[2][rows, ix[on]] = True
             self._occ_key = (self.activity.data_ptr(), self.activity._version)
 
     def set_activity(self, activity: Any) -> None:

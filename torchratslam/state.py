@@ -546,6 +546,9 @@ def save_state(slam: Any, directory: str | Path) -> Path:
 EM_ACCUM = "em.accum"
 """Extra key: the experience map's odometry accumulated since the current experience,
 ``[x m, y m, facing rad, time s]`` in the map frame (merges rotate it)."""
+PC_BEST = "pc.best"
+"""Extra key: the pose cells' last decoded packet centre ``(x, y, th)`` cells (merges move
+it with the activity)."""
 
 
 def _split_extras(prefix: str, d: dict[str, Any], known: set[str], out: MapState) -> None:
@@ -662,3 +665,137 @@ def conform(state: MapState, config: Any) -> MapState:
         state.config.update({k: flat.get(k) for k in missing})
     check_compatible(state, config)
     return state
+
+
+_PC_KNOWN = {"activity", "template_pc", "template_decay", "exp_pc", "exp_template",
+             "current_exp", "current_vt", "prev_vt", "best"}
+_LV_KNOWN = {"templates", "means", "frames", "current_id", "previous_id", "template_shape"}
+
+
+def _np(v: Any) -> np.ndarray:
+    return np.asarray(v.detach().cpu().numpy() if hasattr(v, "detach") else v)
+
+
+def state_from_slam(slam: Any) -> MapState:
+    """The complete state of a running ``RatSLAM`` (or ``MultiSessionRatSLAM``) as a
+    :class:`MapState` (from each module's ``get_state()``)."""
+    slam = getattr(slam, "slam", slam)
+    lv = slam.local_view.get_state()
+    pc = slam.pose_cells.get_state()
+    em = slam.experience_map.get_state()
+    templates = _np(lv["templates"])
+    n = templates.shape[0]
+    means = _np(lv.get("means", templates.reshape(n, -1).mean(1) if n else np.zeros(0)))
+    ends = _np(em["link_ends"]).reshape(-1, 2)
+    vals = _np(em["link_values"]).reshape(-1, 4)
+    exp_pc = _np(pc["exp_pc"]).astype(np.float64).reshape(-1, 3)
+    em_pc = _np(em["pc"]).astype(np.float64).reshape(-1, 3)
+    state = MapState(
+        config=slam.config.to_flat(),
+        templates=np.ascontiguousarray(templates),
+        template_mean=means.astype(np.float64),
+        template_frame=_np(lv.get("frames", np.full(n, -1))).astype(np.int64),
+        template_pc=_np(pc["template_pc"]).astype(np.float64).reshape(-1, 3),
+        template_decay=_np(pc["template_decay"]).astype(np.float64),
+        exp_pose=_np(em["poses"]).astype(np.float64).reshape(-1, 3),
+        exp_pc=exp_pc,
+        exp_template=_np(em["template_id"]).astype(np.int64),
+        exp_frame=_np(em["frame"]).astype(np.int64),
+        exp_t=_np(em["t"]).astype(np.float64),
+        link_from=ends[:, 0].astype(np.int64),
+        link_to=ends[:, 1].astype(np.int64),
+        link_d=vals[:, 0].copy(),
+        link_heading=vals[:, 1].copy(),
+        link_facing=vals[:, 2].copy(),
+        link_dt=vals[:, 3].copy(),
+        activity=np.ascontiguousarray(_np(pc["activity"])),
+        current_vt=int(pc.get("current_vt", lv.get("current_id", -1))),
+        prev_vt=int(pc.get("prev_vt", lv.get("previous_id", -1))),
+        current_exp=int(em["current_id"]),
+        prev_exp=int(em["prev_id"]),
+        frame_index=int(slam.frame_index),
+    )
+    state.extra[EM_ACCUM] = np.array(
+        [em["accum_x"], em["accum_y"], em["accum_facing"], em["accum_time"]], np.float64
+    )
+    state.extra["link:counts"] = _np(em["link_counts"]).astype(np.int64).reshape(-1, 3)
+    state.extra["link:behaviour"] = _np(em["link_behaviour"]).astype(np.int64).reshape(-1)
+    if "best" in pc:
+        state.extra[PC_BEST] = _np(pc["best"]).astype(np.float64).reshape(3)
+    if not np.array_equal(em_pc, exp_pc):
+        state.extra["exp:em_pc"] = em_pc
+    if not np.array_equal(_np(pc["exp_template"]).astype(np.int64), state.exp_template):
+        state.extra["exp:pc_template"] = _np(pc["exp_template"]).astype(np.int64)
+    if int(pc.get("current_exp", state.current_exp)) != state.current_exp:
+        state.scalars["pc.current_exp"] = int(pc["current_exp"])
+    _split_extras("lv", lv, _LV_KNOWN, state)
+    _split_extras("pc", pc, _PC_KNOWN, state)
+    _split_extras("em", em, _EM_KNOWN, state)
+    odo = getattr(slam, "odometry", None)
+    if odo is not None and hasattr(odo, "get_state"):
+        _split_extras("vo", odo.get_state(), set(), state)
+    state.scalars["slam.last_t"] = float(getattr(slam, "_last_t", 0.0))
+    return state.validate(source="running map")
+
+
+def apply_state(state: MapState, slam: Any, *, exp_ids: np.ndarray | None = None) -> None:
+    """Load ``state`` into a running ``RatSLAM`` (or ``MultiSessionRatSLAM``) through each
+    module's ``set_state``, so that it continues exactly as the saved run would have.
+
+    Args:
+        state: the map (checked against the slam's config first).
+        slam: the pipeline.
+        exp_ids: after a merge, the old -> new experience id map of the running map, used
+            to re-point the per-frame history (``trajectory()``) into the merged map.
+
+    Raises:
+        MapFormatError: the map is incompatible with the slam's config.
+    """
+    slam = getattr(slam, "slam", slam)
+    state = conform(state, slam.config)
+    lv = _collect("lv", state)
+    lv.update({
+        "templates": np.ascontiguousarray(state.templates),
+        "means": state.template_mean.copy(),
+        "frames": state.template_frame.copy(),
+        "current_id": int(state.current_vt),
+        "previous_id": int(state.prev_vt),
+        "template_shape": np.asarray(state.templates.shape[1:], np.int64),
+    })
+    lv.setdefault("kind", getattr(slam.local_view, "kind", "ratslam"))
+    lv.setdefault("frame_counter", int(state.frame_index))
+    pc = _collect("pc", state)
+    pc.update({
+        "activity": state.activity.copy(),
+        "template_pc": state.template_pc.copy(),
+        "template_decay": state.template_decay.copy(),
+        "exp_pc": state.exp_pc.copy(),
+        "exp_template": np.array(state.extra.get("exp:pc_template", state.exp_template),
+                                 dtype=np.int64, copy=True),
+        "current_exp": int(state.scalars.get("pc.current_exp", state.current_exp)),
+        "current_vt": int(state.current_vt),
+        "prev_vt": int(state.prev_vt),
+    })
+    pc["current_exp"] = int(state.scalars.get("pc.current_exp", state.current_exp))
+    if PC_BEST in state.extra:
+        pc["best"] = np.array(state.extra[PC_BEST], np.float64, copy=True)
+    pc.pop("best.none", None)
+    em = experience_map_state(state)
+    if "exp:em_pc" in state.extra:
+        em["pc"] = np.array(state.extra["exp:em_pc"], np.float64, copy=True)
+    slam.local_view.set_state(lv)
+    slam.pose_cells.set_state(pc)
+    slam.experience_map.set_state(em)
+    odo = getattr(slam, "odometry", None)
+    vo = _collect("vo", state)
+    if odo is not None and hasattr(odo, "set_state") and vo:
+        odo.set_state(vo)
+    slam.frame_index = int(state.frame_index)
+    if hasattr(slam, "_last_t"):
+        slam._last_t = float(state.scalars.get("slam.last_t", 0.0))
+    if exp_ids is not None and hasattr(slam, "_exp"):
+        ids = np.asarray(exp_ids, np.int64)
+        old = np.asarray(slam._exp, np.int64)
+        ok = (old >= 0) & (old < ids.size)
+        new = np.where(ok, ids[np.where(ok, old, 0)], old)
+        slam._exp[:] = [int(v) for v in new]

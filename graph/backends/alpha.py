@@ -172,6 +172,8 @@ class EdgeColouring:
 
 
 SCHEDULES = ("colour", "reference")
+SCALAR_EDGES_PER_CLASS = 40
+"""Below this many links per class on average, a pass runs as a plain Python loop."""
 
 
 class AlphaBackend:
@@ -242,6 +244,10 @@ class AlphaBackend:
         self._plan(pg)
         e = pg.edges[self._perm]
         m = pg.measurements[self._perm]
+        if pg.num_edges < SCALAR_EDGES_PER_CLASS * len(self._splits):
+            # few links per class: numpy's per-call overhead dominates, so run the SAME
+            # schedule (colour by colour) link by link in plain Python
+            return _relax_scalar(p, e.tolist(), m.tolist(), passes, float(correction))
         mz = m[:, 0] + 1j * m[:, 1]
         mth = m[:, 2] - math.pi  # folds the +pi of the angle wrap into the constant
         classes = []
@@ -271,6 +277,25 @@ class AlphaBackend:
                 th[f] = thf + df
                 th[t] = tht - df
         return np.stack([z.real, z.imag, np.remainder(th + pi, two_pi) - pi], axis=1)
+
+
+def _relax_scalar(p: np.ndarray, edges: list, meas: list, passes: int, c: float) -> np.ndarray:
+    """The alpha rule link by link in the given order (small graphs)."""
+    x, y, th = (p[:, k].tolist() for k in range(3))
+    cos, sin, pi = math.cos, math.sin, math.pi
+    for _ in range(passes):
+        for (f, t), (mx, my, mth) in zip(edges, meas):
+            cf, sf = cos(th[f]), sin(th[f])
+            ex = (x[t] - x[f] - cf * mx + sf * my) * c
+            ey = (y[t] - y[f] - sf * mx - cf * my) * c
+            x[f] += ex
+            y[f] += ey
+            x[t] -= ex
+            y[t] -= ey
+            df = ((th[t] - th[f] - mth + pi) % TWO_PI - pi) * c
+            th[f] = (th[f] + df + pi) % TWO_PI - pi
+            th[t] = (th[t] - df + pi) % TWO_PI - pi
+    return np.stack([np.array(x), np.array(y), np.array(th)], axis=1)
 
 
 def _relax_half(z: np.ndarray, th: np.ndarray, classes: list, passes: int) -> np.ndarray:

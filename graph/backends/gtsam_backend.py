@@ -181,9 +181,9 @@ class ISAM2Backend:
     measurements and endpoints, more nodes and/or edges appended) only adds the new
     factors and initial values (new nodes start at ``pg.poses``) and runs one iSAM2
     update, plus ``extra_updates`` more; a call with an unchanged graph runs one more
-    update (another relinearisation step). The first call, and any other change (edited or deleted links,
-    reordered nodes, as after a map merge or link averaging), rebuilds from ``pg.poses``
-    and iterates until converged.
+    update (another relinearisation step). The first call, and any other change (edited
+    or deleted links, reordered nodes, as after a map merge or link averaging), rebuilds
+    from ``pg.poses`` and iterates until converged.
     When two components with their own priors get linked, it rebuilds too, so a map
     never keeps a stale prior.
 
@@ -235,7 +235,8 @@ class ISAM2Backend:
         if self._isam is None or pg.num_poses < self._n or pg.num_edges < e:
             return False
         if not (
-            np.array_equal(pg.edges[:e], self._edges) and np.array_equal(pg.measurements[:e], self._meas)
+            np.array_equal(pg.edges[:e], self._edges)
+            and np.array_equal(pg.measurements[:e], self._meas)
         ):
             return False
         if (self._info is None) != (pg.information is None):

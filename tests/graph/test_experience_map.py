@@ -414,6 +414,13 @@ def test_malformed_state_raises_map_format_errors():
     state = em.get_state()
     with pytest.raises(MapFormatError, match="version"):
         em.set_state({**state, "version": 99})
+    with pytest.raises(MapFormatError, match="format"):
+        em.set_state({**state, "format": "something else"})
+    # importers may leave out format, version and relative_rad
+    bare = {k: v for k, v in state.items() if k not in ("format", "version", "relative_rad")}
+    em3, _ = make()
+    em3.set_state(bare)
+    assert em3.get_state()["relative_rad"] == 0.0 and len(em3) == len(em)
     with pytest.raises(MapFormatError, match="malformed"):
         em.set_state({k: v for k, v in state.items() if k != "link_values"})
     bad = {**state, "link_ends": state["link_ends"] + len(em)}
@@ -421,6 +428,15 @@ def test_malformed_state_raises_map_format_errors():
         em.set_state(bad)
     with pytest.raises(MapFormatError, match="out of range"):
         em.set_state({**state, "current_id": 10_000})
+    with pytest.raises(MapFormatError, match="scalar"):
+        em.set_state({**state, "accum_x": "north"})
+    twice = np.concatenate([state["link_ends"], state["link_ends"][:1]])
+    values = np.concatenate([state["link_values"], state["link_values"][:1]])
+    counts = np.concatenate([state["link_counts"], state["link_counts"][:1]])
+    beh = np.concatenate([state["link_behaviour"], state["link_behaviour"][:1]])
+    dup = {**state, "link_ends": twice, "link_values": values, "link_counts": counts}
+    with pytest.raises(MapFormatError, match="twice"):
+        em.set_state({**dup, "link_behaviour": beh})
     # a failed load leaves the map as it was
     assert em.get_state()["poses"].tolist() == state["poses"].tolist()
 

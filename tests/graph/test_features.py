@@ -341,6 +341,17 @@ def test_no_deletion_with_threshold_zero():
         em.set_current(0)
     assert em.num_links == 5
     assert em.graph.edges[0, 1]["confidence"] == pytest.approx(1 / 21)
+    # learning a new experience is a departure too: one more failure for 0 -> 1
+    new = em.create_experience(behaviour=1)
+    assert em.graph.edges[0, 1]["trials"] == 22
+    assert em.graph.edges[0, 3]["trials"] == 1  # other behaviour: untouched
+    edge = em.graph.edges[0, new]
+    assert (edge["traversals"], edge["successes"], edge["trials"], edge["behaviour"]) == (
+        1,
+        1,
+        1,
+        1,
+    )
 
 
 def test_link_confidence_function():

@@ -24,7 +24,7 @@ pc_cell_x_size: 0.5
 pc_vt_inject_energy: 0.1
 exp_loops: 5
 """
-SIM = "sim:loop?frames=60"
+SIM = "sim:loop?laps=1&frames=40"
 
 
 def _subparser(name):
@@ -64,7 +64,7 @@ def test_run_writes_every_output(run_out):
         assert (out / name).is_file() and (out / name).stat().st_size > 0, name
     assert (out / "state").is_dir()
     m = json.loads((out / "metrics.json").read_text())
-    assert m["frames"] == 60
+    assert m["frames"] == 40
     for key in ("templates", "experiences", "links", "wall_s", "ate_rmse_m"):
         assert key in m
     for module in ("local_view", "pose_cells", "experience_map"):
@@ -76,7 +76,7 @@ def test_run_writes_every_output(run_out):
     assert len(exps) == m["experiences"] and [int(r["id"]) for r in exps] == list(range(len(exps)))
     traj = list(csv.DictReader((out / "trajectory.csv").open()))
     assert list(traj[0]) == ["frame", "t", "experience_id", "x", "y", "th"]
-    assert len(traj) == 60 and [int(r["frame"]) for r in traj] == list(range(60))
+    assert len(traj) == 40 and [int(r["frame"]) for r in traj] == list(range(40))
     # each trajectory row carries the final pose of its experience
     pose = {int(r["id"]): (float(r["x"]), float(r["y"]), float(r["th"])) for r in exps}
     for r in traj:
@@ -192,28 +192,33 @@ def test_cli_fails_cleanly_on_bad_input(tmp_path, capsys, run_out):
     _fails(["compare-backends", "--map", str(tmp_path / "none.g2o")], capsys, "not found")
 
 
-def test_run_on_a_written_dataset_directory(tmp_path, run_out):
+def test_run_on_a_written_dataset_directory(tmp_path, run_out, capsys):
     from torchratslam.sim import open_sim, write_dataset
 
     _, _, cfg = run_out
-    data = write_dataset(open_sim("sim:loop?frames=25"), tmp_path / "ds")
+    data = write_dataset(open_sim("sim:loop?laps=0.2&frames=12"), tmp_path / "ds")
     out = tmp_path / "out"
-    assert (
-        main(
-            [
-                "run",
-                "--config",
-                str(cfg),
-                "--data",
-                str(data),
-                "--out",
-                str(out),
-                "--no-progress",
-                "--max-frames",
-                "20",
-            ]
-        )
-        == 0
-    )
+    argv = ["run", "--config", str(cfg), "--data", str(data), "--no-progress"]
+    assert main([*argv, "--out", str(out), "--max-frames", "10"]) == 0
     m = json.loads((out / "metrics.json").read_text())
-    assert m["frames"] == 20 and m["odometry"] == "given" and "ate_rmse_m" in m
+    assert m["frames"] == 10 and m["odometry"] == "given" and "ate_rmse_m" in m
+    # without odometry.csv the run switches to visual odometry and says so
+    (data / "odometry.csv").unlink()
+    capsys.readouterr()
+    assert main([*argv, "--out", str(tmp_path / "vo")]) == 0
+    assert "using visual odometry" in capsys.readouterr().err
+    m = json.loads((tmp_path / "vo" / "metrics.json").read_text())
+    assert m["frames"] == 12 and m["odometry"] == "visual"
+
+
+def test_run_with_load_merges_into_the_stored_map(run_out, tmp_path):
+    pytest.importorskip("torchratslam.multisession")
+    _, out, cfg = run_out
+    out2 = tmp_path / "second"
+    argv = ["run", "--config", str(cfg), "--data", SIM, "--out", str(out2), "--no-progress"]
+    assert main([*argv, "--max-frames", "10", "--load", str(out / "state")]) == 0
+    m = json.loads((out2 / "metrics.json").read_text())
+    first = json.loads((out / "metrics.json").read_text())
+    # the same route again: its first view is a stored place, so the session merges at once
+    assert m["merges"] and m["merges"][0]["frame"] == 0 and m["merges"][0]["map"] == 0
+    assert m["experiences"] >= first["experiences"] and m["loaded"] == [str(out / "state")]

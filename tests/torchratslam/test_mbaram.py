@@ -3,6 +3,7 @@ and a ray-cast corridor loop with 682-beam front and rear lasers."""
 
 from __future__ import annotations
 
+import itertools
 import math
 
 import networkx as nx
@@ -66,10 +67,7 @@ def reference_select(m: MBARAM, x: dict, channels=None):
             a = counts[j] / (counts[j] + 1)
             b = 1 / (counts[j] + 1)
             mu, var = m.means(k)[j].tolist(), m.covariances(k)[j].tolist()
-            new = [
-                max(a * v + b * (a * (xi - mi)) ** 2, m.params.var_floor)
-                for xi, mi, v in zip(x[k], mu, var)
-            ]
+            new = [a * v + b * (a * (xi - mi)) ** 2 for xi, mi, v in zip(x[k], mu, var)]
             ok &= math.prod(new) <= m.params.s_max  # Eqs. 7, 8, 10
         if ok:
             return j, score
@@ -168,7 +166,7 @@ def test_vectorised_search_matches_algorithm_1(seed, s_max, n_inputs):
 
 def test_graph_edges_store_adjacent_angle_and_positions():
     # S_MAX between det(Sigma_init / 2) = 1.25e-7 and det(Sigma_init) = 1e-6: only a repeat passes
-    m = MBARAM(MBARAMParams(s_max=2e-7), {"odometry": 1.0})
+    m = MBARAM(MBARAMParams(s_max_odometry=2e-7), {"odometry": 1.0})
     poses = [(0.0, 0.0, 0.0), (10.0, 0.0, 0.0), (10.0, 10.0, 1.5), (0.0, 0.0, 0.0)]
     nodes = [m.learn({"odometry": p}).node for p in poses]
     assert nodes == [0, 1, 2, 0]
@@ -353,7 +351,8 @@ def _rect(x0, y0, x1, y1):
 WALLS = np.concatenate([_rect(-1, -1, 21, 9), _rect(1, 1, 19, 7)])  # a 2 m wide loop
 
 
-def _raycast(x, y, th, n=682, fov=math.radians(240), rmax=30.0):
+def _raycast(x, y, th, n=682, fov_deg=240.0, rmax=30.0):
+    fov = math.radians(fov_deg)
     ang = th + np.linspace(-fov / 2, fov / 2, n)
     d = np.stack([np.cos(ang), np.sin(ang)], 1)[:, None]
     a, e = WALLS[None, :, 0], (WALLS[:, 1] - WALLS[:, 0])[None]
@@ -371,7 +370,7 @@ def corridor_lap(seed: int, step: float = 0.25):
     rng = np.random.default_rng(seed)
     corners = np.array([[0, 0], [20, 0], [20, 8], [0, 8], [0, 0]], float)
     frames, i = [], 0
-    for p, q in zip(corners[:-1], corners[1:]):
+    for p, q in itertools.pairwise(corners):
         length = float(np.linalg.norm(q - p))
         th = math.atan2(q[1] - p[1], q[0] - p[0])
         for s in np.arange(0.0, length, step):

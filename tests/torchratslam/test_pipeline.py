@@ -1,7 +1,6 @@
 """The pipeline: per-frame order, registries, pipelined == sequential, and end to end on
 a short simulated loop (the map closes the loop: ATE well below dead reckoning)."""
 
-
 import numpy as np
 import pytest
 import torch
@@ -230,7 +229,10 @@ def test_time_logger_statistics_and_threads():
     assert "| a | 4 |" in log.table()
     # records from many threads are all kept
     log.reset()
-    threads = [threading.Thread(target=lambda: [log.record("a", 0.001) for _ in range(500)]) for _ in range(4)]
+    threads = [
+        threading.Thread(target=lambda: [log.record("a", 0.001) for _ in range(500)])
+        for _ in range(4)
+    ]
     for t in threads:
         t.start()
     for t in threads:
@@ -239,3 +241,93 @@ def test_time_logger_statistics_and_threads():
     with log.section("c"):
         pass
     assert log.per_frame_ms("c").shape == (1,)
+
+
+# ----------------------------------------------------------------------------- end to end
+REFERENCE_PARAMS = dict(
+    template_x_size=64,
+    template_y_size=16,
+    vt_panoramic=1,
+    vt_shift_match=4,
+    vt_step_match=1,
+    vt_match_threshold=0.06,
+    pc_dim_xy=21,
+    pc_cell_x_size=0.25,
+    pc_vt_inject_energy=0.1,
+    exp_delta_pc_threshold=2,
+    exp_loops=20,
+)
+
+
+@pytest.fixture(scope="module")
+def loop_frames():
+    from torchratslam.sim import get_tour
+
+    session = get_tour("loop", laps=2, frames=400).full()
+    return list(session.frames())
+
+
+@pytest.fixture(scope="module")
+def sequential_run(loop_frames):
+    from torchratslam.config import load_config
+
+    slam = RatSLAM(load_config(None, **REFERENCE_PARAMS))
+    result = slam.run(loop_frames, progress=False)
+    return slam, result
+
+
+def test_end_to_end_the_loop_closes(sequential_run, loop_frames):
+    from torchratslam.eval import ate_rmse, dead_reckoning
+
+    slam, result = sequential_run
+    assert result.frames == len(loop_frames) == slam.frame_index
+    # the second lap re-uses the first lap's places: far fewer templates than frames,
+    # and loop-closing links (more links than a chain of experiences has)
+    assert result.templates < 0.5 * len(loop_frames)
+    assert result.links > result.experiences - 1
+    ate, dr = slam.ate(), slam.dead_reckoning_ate()
+    assert ate < 0.6 * dr, (ate, dr)
+    # the pipeline's own ATE and dead reckoning agree with eval on its outputs
+    gt = np.array([f.pose for f in loop_frames])
+    traj = slam.trajectory()
+    assert ate == pytest.approx(ate_rmse(traj[:, 3:5], gt[:, :2]))
+    odo = np.array([(f.vtrans, f.vrot, f.dt) for f in loop_frames])
+    assert dr == pytest.approx(ate_rmse(dead_reckoning(*odo.T)[:, :2], gt[:, :2]))
+    # the trajectory holds each frame's current experience with its final pose
+    assert np.array_equal(
+        traj[:, 3:], np.asarray(slam.experience_map.poses)[traj[:, 2].astype(int)]
+    )
+    assert slam.templates.shape[0] == result.templates and slam.activity.ndim == 3
+    assert slam.graph.number_of_nodes() == result.experiences
+
+
+def test_end_to_end_pipelined_equals_sequential(sequential_run, loop_frames):
+    from torchratslam.config import load_config
+
+    seq, res = sequential_run
+    slam = RatSLAM(load_config(None, **REFERENCE_PARAMS), pipelined=True)
+    got = []
+    res_p = slam.run(iter(loop_frames), progress=False, callback=got.append)
+    assert res_p.pipelined and [r.frame for r in got] == list(range(len(loop_frames)))
+    assert (res_p.templates, res_p.experiences, res_p.links) == (
+        res.templates,
+        res.experiences,
+        res.links,
+    )
+    assert np.array_equal(
+        np.asarray(seq.experience_map.poses), np.asarray(slam.experience_map.poses)
+    )
+    assert np.array_equal(seq.trajectory(), slam.trajectory())
+    assert torch.equal(seq.templates, slam.templates)
+    assert torch.equal(seq.activity, slam.activity)
+
+
+def test_remap_experiences_repoints_the_history():
+    slam = _fake_slam(Log())
+    slam.run(_frames(10), progress=False)
+    before = slam.trajectory()[:, 2].astype(int)
+    n = len(slam.experience_map)
+    mapping = np.arange(n)[::-1].copy()
+    slam.remap_experiences(mapping)
+    after = slam.trajectory()[:, 2].astype(int)
+    assert [mapping[i] for i in before] == after.tolist()

@@ -300,7 +300,13 @@ def test_irat_like_fifth_session_joins_all_four():
             np.linalg.norm(outer.poses[shared, None, :2] - s.poses[None, :, :2], axis=-1), axis=1
         )
         assert np.median(np.abs(wrap(outer.poses[shared, 2] - s.poses[near, 2]))) < 0.1
-    assert _turn(outer) == pytest.approx(2 * math.pi, abs=0.1)
+    # it comes in along an unmapped spur, turns right onto the outer loop, drives it
+    # counter-clockwise (-90 + 4 x 90 degrees) and passes its entry junction again
+    inner_poses = np.concatenate([s.poses for s in inner])
+    assert _path_dist(outer.poses[:1], inner_poses)[0] > 0.3
+    assert _turn(outer) == pytest.approx(1.5 * math.pi, abs=0.1)
+    entry = np.flatnonzero(np.linalg.norm(outer.poses[:, :2] - [0.0, 0.8], axis=1) < 0.05)
+    assert entry.min() < 60 and entry.max() > len(outer) - 60
 
 
 def test_loop_is_1781_frames_over_six_laps_with_lasers():
@@ -308,7 +314,8 @@ def test_loop_is_1781_frames_over_six_laps_with_lasers():
     assert len(s) == 1781
     assert _turn(s) == pytest.approx(6 * 2 * math.pi, abs=0.1)
     assert np.linalg.norm(s.poses[-1, :2] - s.poses[0, :2]) < 0.2
-    assert s.laps[0] == 0 and s.laps[-1] in (5, 6) and np.all(np.diff(s.laps) >= 0)
+    assert s.laps[0] == 0 and s.laps[-1] == 5 and np.all(np.diff(s.laps) >= 0)
+    assert np.all(np.abs(np.bincount(s.laps) - 1780 / 6) <= 1)  # frames per lap
     f = s.frame(10)
     assert f.image.shape == (64, 256) and f.image.dtype == np.uint8
     assert set(f.scans) == {"laser_front", "laser_rear"}
@@ -382,6 +389,10 @@ def test_open_sim_specs():
         ("sim:loop/session9", ["session1"]),
         ("sim:loop?colour=3", ["colour"]),
         ("loop", ["sim:"]),
+        ("sim:loop?laps=-1", ["laps"]),
+        ("sim:loop?moving_obstacles=-2", ["moving_obstacles"]),
+        ("sim:loop?camera=fisheye", ["fisheye", "panoramic"]),
+        ("sim:loop?seed=abc", ["seed"]),
     ]:
         with pytest.raises(InputError) as e:
             open_sim(bad)

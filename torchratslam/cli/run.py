@@ -131,6 +131,14 @@ def register(subparsers: Any) -> argparse.ArgumentParser:
         metavar="DEVICE",
         help="torch device of the local view and pose cells, e.g. --device cuda",
     )
+    p.add_argument(
+        "--threads",
+        type=int,
+        default=1,
+        metavar="N",
+        help="torch intra-op threads (default 1: the per-frame work is small and extra "
+        "threads mostly add overhead), e.g. --threads 4",
+    )
     p.add_argument("--no-progress", action="store_true", help="no progress bar, e.g. --no-progress")
     p.set_defaults(func=main)
     return p
@@ -269,6 +277,9 @@ def main(args: argparse.Namespace) -> int:
     from torchratslam.pipeline import RatSLAM
     from torchratslam.readers import open_data
 
+    if args.threads < 1:
+        raise InputError(f"--threads must be >= 1, got {args.threads}")
+    torch.set_num_threads(args.threads)
     if args.max_frames is not None and args.max_frames <= 0:
         raise InputError(f"--max-frames must be a positive number of frames, got {args.max_frames}")
     overrides = _overrides(args.set)
@@ -282,7 +293,7 @@ def main(args: argparse.Namespace) -> int:
         image_topic=args.image_topic,
         odom_topic=args.odom_topic,
     )
-    odometry = "given"
+    odometry: str | None = None  # the config's choice (default: the data's odometry)
     if args.visual_odometry or not getattr(data, "has_odometry", True):
         odometry = "visual"
         if not args.visual_odometry:

@@ -72,7 +72,9 @@ def open_sim(spec: str) -> Session:
         InputError: unknown tour, session or option.
     """
     name, session, options = parse_sim_spec(spec)
-    seed = int(options.pop("seed", 0))
+    seed = options.pop("seed", 0)
+    if isinstance(seed, bool) or not isinstance(seed, int):
+        raise InputError(f"seed={seed!r} in {spec!r} must be an integer")
     tour = get_tour(name, seed=seed, **options)
     if session is None or session == "full":
         return tour.full()
@@ -178,7 +180,7 @@ def write_dataset(
             },
             "kidnaps": [int(i) for i in np.flatnonzero(session.odometry[1:, 2] == 0) + 1],
         }
-        (tmp / "meta.json").write_text(json.dumps(meta, indent=2) + "\n")
+        (tmp / "meta.json").write_text(json.dumps(meta, indent=2, default=str) + "\n")
         if out.exists():
             old = Path(tempfile.mkdtemp(prefix=f".{out.name}.old.", dir=out.parent))
             old.rmdir()

@@ -60,7 +60,13 @@ class Route:
 
     @classmethod
     def ellipse(
-        cls, a: float, b: float, *, centre=(0.0, 0.0), start_deg: float = 0.0, n: int = 4000
+        cls,
+        a: float,
+        b: float,
+        *,
+        centre: tuple[float, float] = (0.0, 0.0),
+        start_deg: float = 0.0,
+        n: int = 4000,
     ) -> Route:
         """A counter-clockwise ellipse with semi-axes ``a`` (x) and ``b`` (y)."""
         t = np.radians(start_deg) + np.linspace(0, 2 * np.pi, n, endpoint=False)
@@ -75,13 +81,16 @@ class Route:
         n_arc: int = 24,
         closed: bool = True,
     ) -> Route:
-        """A polyline through ``corners`` with corners rounded by circular arcs of ``radius``."""
+        """A polyline through ``corners`` with corners rounded by circular arcs of ``radius``.
+
+        A closed polygon rounds every corner; an open polyline keeps its two ends.
+        """
         c = np.asarray(corners, np.float64)
-        if not closed or radius <= 0:
+        if radius <= 0 or len(c) < 3:
             return cls(c, closed=closed)
-        out = []
         n = len(c)
-        for i in range(n):
+        out = [] if closed else [c[0]]
+        for i in range(n) if closed else range(1, n - 1):
             p, q, r = c[i - 1], c[i], c[(i + 1) % n]
             d1, d2 = (q - p) / np.linalg.norm(q - p), (r - q) / np.linalg.norm(r - q)
             turn = np.arctan2(d1[0] * d2[1] - d1[1] * d2[0], d1 @ d2)
@@ -94,14 +103,15 @@ class Route:
                 0.49 * np.linalg.norm(r - q),
             )
             rad = cut / np.tan(abs(turn) / 2)
-            a, b = q - d1 * cut, q + d2 * cut
+            a = q - d1 * cut
             normal = np.array([-d1[1], d1[0]]) * np.sign(turn)
             centre = a + normal * rad
             a0 = np.arctan2(*(a - centre)[::-1])
             ang = a0 + np.linspace(0, turn, n_arc)
             out.extend(centre + rad * np.stack([np.cos(ang), np.sin(ang)], -1))
-            del b
-        return cls(np.array(out), closed=True)
+        if not closed:
+            out.append(c[-1])
+        return cls(np.array(out), closed=closed)
 
 
 @dataclass(frozen=True)

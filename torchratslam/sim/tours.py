@@ -1,21 +1,18 @@
 """Tours: worlds, routes and sessions reproducing the papers' experiments.
 
-=============== ============================================ ============================
-tour            sessions (frames at the defaults)            camera, rate, odometry noise
-=============== ============================================ ============================
-virtual_tour    session1: 3/4 lap from the blue cross (113);   256x64 panoramic, 1 Hz,
-                session2: 2.9 laps from an unmapped point      150 frames per 60.7 m lap
-                0.873 lap round, reaching session1's start
-                after 19 frames (436)
-lab_tour        session1: 2 CCW laps of the small rectangle   640x480 forward 50 deg, 1 Hz,
-                (153); session2: 1.9 CCW laps of the large     0.25 m/s
-                one from an unmapped point (206)
-irat_like       session1-4: one CCW lap around each of the    160x96 forward 75 deg, 10 Hz,
-                four blocks (197 each); session5: the outer   0.2 m/s (a 2.4 x 1.6 m road
-                loop (394), joining all four                  network, iRat scale)
-loop            session1: 6 laps of a corridor loop (1781)     256x64 panoramic, 5 Hz,
-                                                              lasers on
-=============== ============================================ ============================
+* ``virtual_tour`` (multisession paper, Fig. 5): an ellipse (60.7 m lap) in a hall;
+  256x64 panoramic, 1 Hz, 150 frames per lap. session1: a 3/4 lap (113 frames);
+  session2: 2.9 laps from an unmapped point 0.873 lap round, reaching session1's
+  start after 19 frames and replaying its frames from there (436 frames).
+* ``lab_tour`` (Fig. 6): two rectangles forming a digital "8"; 640x480 forward camera
+  (50 degrees), 1 Hz, 0.25 m/s. session1: two CCW laps of the small rectangle (153);
+  session2: 1.9 CCW laps of the large one from an unmapped point (206).
+* ``irat_like`` (Fig. 7): a 2 x 2 block road network at iRat scale (2.4 x 1.6 m);
+  160x96 forward camera (75 degrees), 10 Hz, 0.2 m/s. session1-4: one CCW lap around
+  each block (194 each); session5: in along an unmapped spur, then the outer loop,
+  which joins all four (433).
+* ``loop``: a corridor loop (38.3 m lap), 256x64 panoramic, 5 Hz, lasers on.
+  session1: 6 laps, 1781 frames.
 
 Every tour takes ``seed`` (textures, odometry noise, obstacles) and these options:
 
@@ -41,6 +38,7 @@ import itertools
 import math
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field, replace
+from typing import Any
 
 import numpy as np
 
@@ -175,7 +173,11 @@ class Session:
             dt=float(dt),
             pose=(float(self.poses[k, 0]), float(self.poses[k, 1]), float(self.poses[k, 2])),
             scans=self.scans(k),
-            meta={"tour": self.tour, "session": self.name, "lap": int(self.laps[k])},
+            meta={
+                "tour": self.tour,
+                "session": f"session{self.keys[k, 1]}",
+                "lap": int(self.laps[k]),
+            },
         )
 
     def frames(self, start: int = 0, stop: int | None = None) -> Iterator[Frame]:
@@ -296,7 +298,7 @@ class Tour:
             info=ss[0].info,
         )
 
-    def plot(self, ax=None, *, legend: bool = True):
+    def plot(self, ax: Any = None, *, legend: bool = True) -> Any:
         """Floor plan with each session's path coloured; crosses mark starts, diamonds ends."""
         import matplotlib.pyplot as plt
 
@@ -360,6 +362,10 @@ def _split_options(name: str, options: dict, own: Callable) -> tuple[_Opts, dict
         key = sorted(bad)[0]
         raise InputError(unknown_name_message(f"option of tour {name!r}", key, common | specific))
     o = _Opts(**{k: v for k, v in options.items() if k in common})
+    for key in ("fog", "pixel_noise", "illumination", "moved_obstacles", "moving_obstacles"):
+        v = getattr(o, key)
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or v < 0:
+            raise InputError(f"tour option {key}={v!r} must be a number >= 0")
     if o.illumination_mode not in ("auto", "session", "lap", "drift"):
         raise InputError(f"illumination_mode {o.illumination_mode!r}: use session, lap or drift")
     return o, {k: v for k, v in options.items() if k in specific}
@@ -483,13 +489,17 @@ def _assemble(name: str, b: _Build, o: _Opts, seed: int, options: dict) -> Tour:
         0.5, 1, 64
     )
     session_gain[0] = 1.0
+    all_poses = [poses_along(route, s0 + ds * np.arange(n)) for _, route, s0, n, ds, _ in b.plan]
+    path_xy = np.concatenate(all_poses)[:, :2]
     for i, (sname, route, s0, n, ds, hz) in enumerate(b.plan):
         s = s0 + ds * np.arange(n)
-        poses = poses_along(route, s)
+        poses = all_poses[i]
         dt = 1.0 / hz
         times = np.arange(n) * dt
         odo = odometry_from_poses(poses, dt, b.noise, np.random.default_rng([seed, 1000 + i]))
         laps = np.floor((s - s0) / route.length + 1e-9).astype(np.int64)
+        # a final frame that closes the last lap exactly belongs to that lap
+        laps = np.minimum(laps, max(0, math.ceil((s[-1] - s0) / route.length - 1e-9) - 1))
         if mode == "session":
             gain = np.full(n, session_gain[i])
         elif mode == "lap":
@@ -504,12 +514,7 @@ def _assemble(name: str, b: _Build, o: _Opts, seed: int, options: dict) -> Tour:
                     key = (i, int(lap))
                     if key not in layouts:
                         g = np.random.default_rng([seed, 55, i, int(lap)])
-                        m = b.main_route
-                        sm = g.uniform(0, m.length, n_moved)
-                        side = g.choice([-1.0, 1.0], n_moved)
-                        layouts[key] = (
-                            m.at(sm) + _normals(m, sm) * (side * b.obstacle_offset)[:, None]
-                        )
+                        layouts[key] = _place_boxes(g, b, n_moved, path_xy)
                     centres[laps == lap, :n_moved] = layouts[key]
             if n_people:
                 start, speed, side = peds
@@ -518,7 +523,11 @@ def _assemble(name: str, b: _Build, o: _Opts, seed: int, options: dict) -> Tour:
                 sp = start[None, :] + speed[None, :] * side[None, :] * tt
                 pos = m.at(sp.ravel()).reshape(n, n_people, 2)
                 nrm = _normals(m, sp.ravel()).reshape(n, n_people, 2)
-                centres[:, n_moved:] = pos + nrm * (side * b.pedestrian_offset)[None, :, None]
+                ped = pos + nrm * (side * b.pedestrian_offset)[None, :, None]
+                # a pedestrian about to be run into steps out of the way (hidden)
+                close = np.linalg.norm(ped - poses[:, None, :2], axis=-1) < 0.45 * b.scale
+                ped[close] = 1e4
+                centres[:, n_moved:] = ped
             obstacles = Obstacles(shape=shape, centres=centres, world=obst_world)
         t_global += n * dt
         sessions.append(
@@ -551,6 +560,24 @@ def _assemble(name: str, b: _Build, o: _Opts, seed: int, options: dict) -> Tour:
     )
 
 
+def _place_boxes(g: np.random.Generator, b: _Build, n: int, path_xy: np.ndarray) -> np.ndarray:
+    """``(n, 2)`` centres beside the main route, clear of every session's path."""
+    m = b.main_route
+    cand = 40 * n
+    sm = g.uniform(0, m.length, cand)
+    side = g.choice([-1.0, 1.0], cand)
+    xy = m.at(sm) + _normals(m, sm) * (side * b.obstacle_offset)[:, None]
+    sub = path_xy[:: max(1, len(path_xy) // 4000)]
+    clear = np.ones(cand, bool)
+    for a in range(0, cand, 256):  # chunks bound the (candidates x path points) memory
+        d = np.linalg.norm(xy[a : a + 256, None] - sub[None], axis=-1).min(1)
+        clear[a : a + 256] = d > 0.75 * b.obstacle_size + 0.3 * b.scale
+    ok = xy[clear]
+    if len(ok) < n:  # pragma: no cover - the tours leave plenty of room
+        raise InputError(f"no room for {n} moved obstacles in tour {b.world.name!r}")
+    return ok[:n]
+
+
 def _check_clear(world: World, route: Route, clearance: float) -> None:
     """Raise if a wall comes closer than ``clearance`` to the route (a builder bug)."""
     p = route.at(np.linspace(0, route.length, 2000, endpoint=False))
@@ -570,6 +597,7 @@ def virtual_tour(
 ) -> _Build:
     """Ellipse (24 x 14 m) in a 36 x 26 m hall (multisession paper, Fig. 5)."""
     o = opts or _Opts()
+    _positive(frames_per_lap=frames_per_lap - 3, hz=hz)
     route = Route.ellipse(12.0, 7.0, start_deg=-90.0)
     wb = WorldBuilder(seed=seed, wall_height=5.0)
     wb.polyline([(-18, -13), (18, -13), (18, 13), (-18, 13)])
@@ -616,6 +644,7 @@ def lab_tour(
 ) -> _Build:
     """Two rectangles sharing three sides and a middle bar, a digital '8' (Fig. 6)."""
     o = opts or _Opts()
+    _positive(speed=speed, hz=hz)
     small = Route.polygon([(0, 4), (6, 4), (6, 8), (0, 8)], radius=0.6)
     large = Route.polygon([(0, 0), (6, 0), (6, 8), (0, 8)], radius=0.6)
     wb = WorldBuilder(seed=seed, wall_height=2.5)
@@ -668,16 +697,31 @@ def irat_like(
 ) -> _Build:
     """A 2 x 2 block road network, iRat scale (Fig. 7): four inner loops and the outer loop."""
     o = opts or _Opts()
+    _positive(speed=speed, hz=hz)
     k = 0.1  # built at 10x, scaled down to iRat size
     gx, gy, half = 12.0, 8.0, 1.5
     wb = WorldBuilder(seed=seed, wall_height=3.0)
+    # outer wall with an opening on the left road where a spur (driveway) joins
     wb.polyline(
         [
+            (-half, gy - half),
             (-half, -half),
             (2 * gx + half, -half),
             (2 * gx + half, 2 * gy + half),
             (-half, 2 * gy + half),
-        ]
+            (-half, gy + half),
+        ],
+        closed=False,
+    )
+    spur = 6.0
+    wb.polyline(
+        [
+            (-half, gy - half),
+            (-half - spur, gy - half),
+            (-half - spur, gy + half),
+            (-half, gy + half),
+        ],
+        closed=False,
     )
     for bx in range(2):
         for by in range(2):
@@ -694,7 +738,23 @@ def irat_like(
     outer = Route.polygon(
         [(0, 0), (2 * gx * k, 0), (2 * gx * k, 2 * gy * k), (0, 2 * gy * k)], radius=r
     )
+    # session 5 comes in along the spur (unmapped), turns south, drives the outer loop
+    # and passes the junction again
+    fifth = Route.polygon(
+        [
+            (-(half + spur - 1.5) * k, gy * k),
+            (0, gy * k),
+            (0, 0),
+            (2 * gx * k, 0),
+            (2 * gx * k, 2 * gy * k),
+            (0, 2 * gy * k),
+            (0, gy * k - 1.5 * half * k),
+        ],
+        radius=r,
+        closed=False,
+    )
     routes["outer"] = outer
+    routes["session5"] = fifth
     for rt in routes.values():
         _check_clear(world, rt, 0.1)
     ds = speed / hz
@@ -710,17 +770,7 @@ def irat_like(
         plan.append(
             (f"session{i + 1}", rt, _arc_of(rt, starts[i]), round(rt.length / ds) + 1, ds, hz)
         )
-    # the outer loop starts on the left road at the T junction, heading down (-y)
-    plan.append(
-        (
-            "session5",
-            outer,
-            _arc_of(outer, (0.0, gy * k)),
-            round(outer.length / ds) + 1,
-            ds,
-            hz,
-        )
-    )
+    plan.append(("session5", fifth, 0.0, int(fifth.length / ds) + 1, ds, hz))
     return _Build(
         world=world,
         routes=routes,
@@ -755,6 +805,7 @@ def loop(
 ) -> _Build:
     """A corridor loop (12 x 8 m centre line, 2.5 m wide) driven several times."""
     o = opts or _Opts()
+    _positive(laps=laps, hz=hz, frames=(frames - 1) if frames is not None else 1)
     route = Route.polygon([(0, 0), (12, 0), (12, 8), (0, 8)], radius=1.0)
     wb = WorldBuilder(seed=seed, wall_height=2.5)
     wb.polyline([(-1.25, -1.25), (13.25, -1.25), (13.25, 9.25), (-1.25, 9.25)])
@@ -766,11 +817,12 @@ def loop(
         (13.0, 3.0, 0.5, 1.2),
         (6.0, 9.0, 2.0, 0.5),
         (-1.0, 5.5, 0.5, 1.8),
-        (1.5, 4.0, 0.5, 0.5),
-        (6.0, 1.5, 1.0, 0.5),
-        (10.5, 5.0, 0.5, 0.8),
+        (1.0, 4.0, 0.5, 0.5),
+        (6.0, 1.0, 1.0, 0.5),
+        (11.0, 5.0, 0.5, 0.8),
         (9.5, 9.0, 0.6, 0.5),
         (-1.0, 1.5, 0.5, 0.6),
+        (4.0, 7.0, 0.8, 0.5),
     ):
         wb.box(cx, cy, w, h, height=1.8)
     world = wb.build(name="loop")
@@ -798,6 +850,12 @@ def loop(
         obstacle_height=1.2,
         description="single-session corridor loop (the classic loop-closure test), lasers on",
     )
+
+
+def _positive(**values: float) -> None:
+    for key, v in values.items():
+        if not isinstance(v, (int, float)) or not v > 0:
+            raise InputError(f"tour option {key} is too small or not a number; give a larger value")
 
 
 def _arc_of(route: Route, point: tuple[float, float]) -> float:

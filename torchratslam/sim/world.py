@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import itertools
 from dataclasses import dataclass, field, replace
+from typing import Any
 
 import numpy as np
 
@@ -185,7 +186,9 @@ class World:
             kinds=self.kinds + extra.kinds,
         )
 
-    def plot(self, ax, *, color: str = "k", obstacle_color: str = "0.5", lw: float = 1.5):
+    def plot(
+        self, ax: Any, *, color: str = "k", obstacle_color: str = "0.5", lw: float = 1.5
+    ) -> Any:
         """Draw the floor plan on a matplotlib axes (walls black, boxes grey)."""
         from matplotlib.collections import LineCollection
 
