@@ -14,8 +14,18 @@ __all__ = [
     "ConfigError",
     "InputError",
     "MapFormatError",
+    "RatSLAM",
     "RatSLAMConfig",
     "RatSLAMError",
     "__version__",
     "load_config",
 ]
+
+
+def __getattr__(name: str):
+    # Heavy modules load on first use, so ``import torchratslam`` stays cheap.
+    if name == "RatSLAM":
+        from torchratslam.pipeline import RatSLAM
+
+        return RatSLAM
+    raise AttributeError(f"module 'torchratslam' has no attribute {name!r}")

@@ -47,7 +47,13 @@ class GeneralParams(Params):
 
     section: ClassVar[str] = "general"
 
-    topic_root: str = param("", "ROS topic prefix: images at <root>/camera/image, odometry at <root>/odom")
+    topic_root: str = param(
+        "", "ROS topic prefix: images at <root>/camera/image, odometry at <root>/odom"
+    )
+    local_view: str = param("ratslam", "local view module (a name in registry.LOCAL_VIEWS)")
+    pose_cells: str = param("ratslam", "pose-cell module (a name in registry.POSE_CELLS)")
+    experience_map: str = param("ratslam", "experience map (a name in registry.EXPERIENCE_MAPS)")
+    odometry: str = param("given", "odometry source: given | visual (registry.ODOMETRY)")
 
 
 @dataclass(frozen=True)

@@ -68,6 +68,8 @@ __all__ = [
 STATE_VERSION = 1
 # Elements per chunk of the exact and bound computations (bounds the temporary memory).
 CHUNK_ELEMENTS = 1 << 19
+# Groups of rows whose column sums give the matcher's lower bounds.
+GROUPS = 4
 
 
 # --------------------------------------------------------------------------- input
@@ -216,12 +218,15 @@ class TemplateBank:
     """All templates in one preallocated tensor that grows by doubling.
 
     Row ``i`` holds template id ``i``. Per template the bank also keeps its mean, its
-    creation frame and small summaries used by the matcher's lower bounds: the column
-    sums (``X``), the column sums sorted (``X``) and the row sums (``Y``).
+    creation frame and the small summaries the matcher's lower bounds use: the column
+    sums of ``G = min(4, Y)`` groups of rows (``gsum``, ``(G, X)``), and either these
+    sorted along the columns (``gsort``, panoramic) or their cumulative sums (``gcum``,
+    ``(G, X + 1)``, normal mode).
 
     Args:
         y_size: template height (rows).
         x_size: template width (columns).
+        panoramic: which summaries to keep (see above).
         capacity: initial number of rows.
         dtype: template dtype.
         device: template device.
@@ -232,6 +237,7 @@ class TemplateBank:
         y_size: int,
         x_size: int,
         *,
+        panoramic: bool = False,
         capacity: int = 64,
         dtype: torch.dtype = torch.float32,
         device: torch.device | str | None = None,
@@ -239,27 +245,34 @@ class TemplateBank:
         if y_size <= 0 or x_size <= 0:
             raise ConfigError(f"template size must be positive, got {x_size}x{y_size}")
         self.y_size, self.x_size = int(y_size), int(x_size)
+        self.groups = min(GROUPS, self.y_size)
+        self.panoramic = bool(panoramic)
         self.dtype, self.device = dtype, torch.device(device) if device is not None else None
         self._n = 0
+        self._capacity = 0
         self._alloc(max(1, int(capacity)))
 
+    def _shapes(self) -> dict[str, tuple[int, ...]]:
+        y, x, g = self.y_size, self.x_size, self.groups
+        shapes = {"data": (y, x), "means": (), "gsum": (g, x)}
+        if self.panoramic:
+            shapes["gsort"] = (g, x)
+        else:
+            shapes["gcum"] = (g, x + 1)
+        return shapes
+
     def _alloc(self, capacity: int) -> None:
-        kw = {"dtype": self.dtype, "device": self.device}
-        y, x = self.y_size, self.x_size
-        new = {
-            "data": torch.zeros(capacity, y, x, **kw),
-            "means": torch.zeros(capacity, **kw),
-            "colsum": torch.zeros(capacity, x, **kw),
-            "colsort": torch.zeros(capacity, x, **kw),
-            "rowsum": torch.zeros(capacity, y, **kw),
-            "gcum": torch.zeros(capacity, min(4, y), x + 1, **kw),
-            "frames": torch.full((capacity,), -1, dtype=torch.int64, device=self.device),
-        }
-        for name, tensor in new.items():
+        for name, shape in self._shapes().items():
+            tensor = torch.zeros(capacity, *shape, dtype=self.dtype, device=self.device)
             old = getattr(self, "_" + name, None)
             if old is not None:
                 tensor[: self._n] = old[: self._n]
             setattr(self, "_" + name, tensor)
+        frames = torch.full((capacity,), -1, dtype=torch.int64, device=self.device)
+        old = getattr(self, "_frames", None)
+        if old is not None:
+            frames[: self._n] = old[: self._n]
+        self._frames = frames
         self._capacity = capacity
 
     @property
@@ -272,7 +285,7 @@ class TemplateBank:
 
     @property
     def data(self) -> torch.Tensor:
-        """The templates, shape ``(N, Y, X)`` (a view, do not modify)."""
+        """The templates, shape ``(N, Y, X)`` (a view; do not modify)."""
         return self._data[: self._n]
 
     @property
@@ -290,31 +303,10 @@ class TemplateBank:
         """Template ids, shape ``(N,)`` (the row numbers)."""
         return torch.arange(self._n, device=self.device)
 
-    @property
-    def colsum(self) -> torch.Tensor:
-        return self._colsum[: self._n]
-
-    @property
-    def colsort(self) -> torch.Tensor:
-        return self._colsort[: self._n]
-
-    @property
-    def rowsum(self) -> torch.Tensor:
-        return self._rowsum[: self._n]
-
-    @property
-    def gcum(self) -> torch.Tensor:
-        """Cumulative column sums of up to 4 row groups, shape ``(N, G, X + 1)``."""
-        return self._gcum[: self._n]
-
     def bytes_per_template(self) -> int:
-        """Memory per stored template (data, metadata and bound summaries)."""
-        g = min(4, self.y_size)
-        floats = (
-            self.y_size * self.x_size + 1 + 2 * self.x_size + self.y_size + g * (self.x_size + 1)
-        )
-        per = floats * (torch.finfo(self.dtype).bits // 8)
-        return per + 8
+        """Memory per stored template: data, summaries and metadata."""
+        floats = sum(math.prod(shape) for shape in self._shapes().values())
+        return floats * (torch.finfo(self.dtype).bits // 8) + 8
 
     def append(self, templates: torch.Tensor, frames: torch.Tensor | int | None = None) -> range:
         """Append templates; returns their ids.
@@ -344,17 +336,22 @@ class TemplateBank:
         sl = slice(self._n, self._n + k)
         self._data[sl] = t
         self._means[sl] = t.mean(dim=(1, 2))
-        cs = t.sum(1)
-        self._colsum[sl] = cs
-        self._colsort[sl] = cs.sort(-1).values
-        self._rowsum[sl] = t.sum(2)
-        gsums = torch.stack([g.sum(-2) for g in _row_groups(t)], dim=1)  # (K, G, X)
-        self._gcum[sl, :, 1:] = gsums.cumsum(-1)
+        gsum = _group_sums(t, self.groups)  # (K, G, X)
+        self._gsum[sl] = gsum
+        if self.panoramic:
+            self._gsort[sl] = gsum.sort(-1).values
+        else:
+            self._gcum[sl, :, 1:] = gsum.cumsum(-1)
         if frames is None:
             frames = -1
         self._frames[sl] = torch.as_tensor(frames, dtype=torch.int64, device=self.device)
         self._n += k
         return range(self._n - k, self._n)
+
+
+def _group_sums(x: torch.Tensor, groups: int) -> torch.Tensor:
+    """Column sums of ``groups`` nearly equal groups of rows: ``(..., Y, X) -> (..., G, X)``."""
+    return torch.stack([g.sum(-2) for g in torch.tensor_split(x, groups, dim=-2)], dim=-2)
 
 
 # ------------------------------------------------------------------------- matcher
@@ -364,16 +361,18 @@ class TemplateMatcher:
     """Exact best (template, offset) by mean absolute difference, with exact pruning.
 
     The search is a cascade of lower bounds of a pair's sum of absolute differences
-    (SAD), each cheaper than the next: a template or pair is skipped only when its bound
-    exceeds the best SAD already found (plus a rounding margin), so the answer equals a
-    brute-force loop's. Bounds (all follow from the triangle inequality):
+    (SAD), each cheaper than the next level: a template or a pair is skipped only when
+    its bound exceeds the best SAD already found (plus a rounding margin), so the answer
+    equals a brute-force loop's. With ``G`` groups of rows and their column sums
+    (``gsum``), the triangle inequality gives (successive elimination, as in block
+    matching):
 
-    * panoramic, per template (any offset): L1 distance of the row sums (circular shifts
-      keep them), and of the sorted column sums (L1 between sorted profiles is the least
-      L1 over all column permutations);
-    * normal mode, per (template, offset): L1 distance of the compared window's sums over
-      a few groups of rows;
-    * per (template, offset): L1 distance of the column-sum profiles.
+    * panoramic, per template (any offset): the L1 distance between the view's and the
+      template's group column sums, each sorted along the columns (sorting gives the
+      least L1 over all column permutations, circular shifts included);
+    * normal mode, per (template, offset): the L1 distance of the compared window's
+      group totals (from cumulative sums);
+    * per (template, offset): the L1 distance of the group column-sum profiles.
 
     Exact errors are then evaluated for the surviving pairs in increasing order of their
     bound, in chunks that grow geometrically, stopping when the next bound exceeds the
@@ -399,13 +398,13 @@ class TemplateMatcher:
         device: torch.device | str | None = None,
     ) -> None:
         self.y_size, self.x_size = y_size, x_size
+        self.groups = min(GROUPS, y_size)
         self.panoramic, self.shift, self.step = bool(panoramic), int(shift), int(step)
         if step <= 0:
             raise ConfigError(f"vt_step_match must be positive, got {step}")
         if self.panoramic:
             self.width = x_size
             offs = torch.arange(0, x_size, step)
-            self._start = 0
         else:
             self.width = x_size - 2 * shift
             if self.width <= 0:
@@ -414,34 +413,47 @@ class TemplateMatcher:
                     "normal (non-panoramic) mode; lower vt_shift_match or widen the template"
                 )
             offs = torch.arange(0, 2 * shift + 1, step)
-            self._start = shift
         self.offsets = offs.to(device)
         self.n_offsets = int(offs.numel())
         self.npix = y_size * self.width
-        # view column compared with template column c at offset k (panoramic): c - o mod X
+        # panoramic: the view rolled so that its column c - o faces template column c
         cols = torch.arange(x_size)
         self._roll = ((cols[None, :] - offs[:, None]) % x_size).to(device)  # (K, X)
-        # normal mode: template columns of each offset's window
-        self._win = (offs[:, None] + torch.arange(self.width)[None, :]).to(device)  # (K, W)
+
+    def make_bank(self, *, dtype: torch.dtype, device: torch.device | str | None) -> TemplateBank:
+        """An empty bank with the summaries this matcher needs."""
+        return TemplateBank(
+            self.y_size, self.x_size, panoramic=self.panoramic, dtype=dtype, device=device
+        )
 
     # ----------------------------------------------------------------- view side
 
-    def _view_parts(self, view: torch.Tensor) -> dict:
+    def _view_parts(self, view: torch.Tensor) -> dict[str, torch.Tensor]:
         """Per-frame view summaries used by the bounds and the exact kernel."""
-        parts: dict = {"view": view, "col": view.sum(0)}
+        g = self.groups
         if self.panoramic:
-            parts["rolled"] = view[:, self._roll].permute(1, 0, 2).reshape(self.n_offsets, -1)
-            parts["rowsum"] = view.sum(1)
-            parts["colsort"] = parts["col"].sort().values
-            parts["col_rolled"] = parts["col"][self._roll]  # (K, X)
-        else:
-            block = view[:, self.shift : self.shift + self.width]
-            parts["block"] = block.contiguous()
-            parts["gsum"] = torch.stack([g.sum() for g in _row_groups(block)])  # (G,)
-            parts["col_block"] = parts["col"][self.shift : self.shift + self.width]
-        return parts
+            gsum = _group_sums(view, g)  # (G, X)
+            return {
+                "rolled": view[:, self._roll].permute(1, 0, 2).reshape(self.n_offsets, -1),
+                "gsort": gsum.sort(-1).values,
+                "g_rolled": gsum[:, self._roll].permute(1, 0, 2).reshape(self.n_offsets, -1),
+            }
+        block = view[:, self.shift : self.shift + self.width].contiguous()
+        gblock = _group_sums(block, g)  # (G, W)
+        return {"block": block, "gblock": gblock, "gtotal": gblock.sum(-1)}
 
     # -------------------------------------------------------------- exact errors
+
+    def _by_offset(self, k: torch.Tensor) -> list[tuple[int, torch.Tensor]]:
+        """Pairs grouped by offset index (normal mode has a few offsets)."""
+        order = torch.argsort(k, stable=True)
+        counts = torch.bincount(k, minlength=self.n_offsets).tolist()
+        out, s = [], 0
+        for kk, c in enumerate(counts):
+            if c:
+                out.append((kk, order[s : s + c]))
+            s += c
+        return out
 
     def pair_sad(
         self, bank: TemplateBank, parts: dict, t: torch.Tensor, k: torch.Tensor
@@ -454,23 +466,21 @@ class TemplateMatcher:
         out = torch.empty(t.numel(), dtype=bank.dtype, device=t.device)
         if t.numel() == 0:
             return out
-        per = max(1, CHUNK_ELEMENTS // max(1, self.y_size * self.x_size))
+        per = max(1, CHUNK_ELEMENTS // (self.y_size * self.x_size))
         if self.panoramic:
-            flat = bank._data.view(bank._capacity, -1)
+            flat = bank._data.view(bank.capacity, -1)
             rolled = parts["rolled"]
             for s in range(0, t.numel(), per):
                 e = s + per
                 rows = flat.index_select(0, t[s:e]) - rolled.index_select(0, k[s:e])
                 out[s:e] = rows.abs_().sum(1)
             return out
-        block = parts["block"]
-        data = bank._data
-        for kk in torch.unique(k).tolist():  # a few offsets: group pairs by offset
-            sel = (k == kk).nonzero()[:, 0]
+        block, w = parts["block"], self.width
+        for kk, sel in self._by_offset(k):
             o = int(self.offsets[kk])
             for s in range(0, sel.numel(), per):
                 idx = sel[s : s + per]
-                win = data.index_select(0, t.index_select(0, idx))[:, :, o : o + self.width]
+                win = bank._data.index_select(0, t.index_select(0, idx))[:, :, o : o + w]
                 out[idx] = (win - block).abs_().sum(dim=(1, 2))
         return out
 
@@ -500,29 +510,49 @@ class TemplateMatcher:
 
     # -------------------------------------------------------------- lower bounds
 
-    def _template_bound(self, bank: TemplateBank, parts: dict) -> torch.Tensor:
-        """Offset-independent lower bound of the SAD per template (panoramic)."""
-        b_rows = (bank.rowsum - parts["rowsum"]).abs().sum(1)
-        b_cols = (bank.colsort - parts["colsort"]).abs().sum(1)
-        return torch.maximum(b_rows, b_cols)
+    def template_bound(self, bank: TemplateBank, parts: dict) -> torch.Tensor:
+        """Panoramic: lower bound of every template's SAD at any offset, ``(N,)``."""
+        n = len(bank)
+        out = torch.empty(n, dtype=bank.dtype, device=bank._data.device)
+        gsort = bank._gsort.view(bank.capacity, -1)
+        vs = parts["gsort"].reshape(-1)
+        per = max(1, CHUNK_ELEMENTS // vs.numel())
+        for s in range(0, n, per):
+            e = min(s + per, n)
+            out[s:e] = (gsort[s:e] - vs).abs_().sum(1)
+        return out
 
-    def _window_bound(self, bank: TemplateBank, parts: dict) -> torch.Tensor:
-        """Row-group window-sum bound for every template and offset (normal), ``(N, K)``."""
-        gcum = bank.gcum  # (N, G, X+1)
+    def window_bound(self, bank: TemplateBank, parts: dict) -> torch.Tensor:
+        """Normal mode: group-total bound of every template and offset, ``(N, K)``."""
+        gcum = bank._gcum[: len(bank)]  # (N, G, X+1)
         lo = self.offsets
-        win = gcum[:, :, lo + self.width] - gcum[:, :, lo]  # (N, G, K)
-        return (win - parts["gsum"][None, :, None]).abs_().sum(1)
+        win = gcum.index_select(2, lo + self.width) - gcum.index_select(2, lo)  # (N, G, K)
+        return (win - parts["gtotal"][None, :, None]).abs_().sum(1)
 
-    def _profile_bound(
+    def profile_bound(
         self, bank: TemplateBank, parts: dict, t: torch.Tensor, k: torch.Tensor
     ) -> torch.Tensor:
-        """Column-sum profile bound of (template, offset index) pairs, ``(P,)``."""
-        cs = bank._colsum
+        """Group column-profile bound of (template, offset index) pairs, ``(P,)``."""
+        out = torch.empty(t.numel(), dtype=bank.dtype, device=t.device)
+        if t.numel() == 0:
+            return out
+        per = max(1, CHUNK_ELEMENTS // (self.groups * self.x_size))
         if self.panoramic:
-            rows = cs.index_select(0, t) - parts["col_rolled"].index_select(0, k)
-            return rows.abs_().sum(1)
-        rows = torch.gather(cs.index_select(0, t), 1, self._win.index_select(0, k))  # (P, W)
-        return (rows - parts["col_block"]).abs_().sum(1)
+            gs = bank._gsum.view(bank.capacity, -1)
+            gr = parts["g_rolled"]
+            for s in range(0, t.numel(), per):
+                e = s + per
+                rows = gs.index_select(0, t[s:e]) - gr.index_select(0, k[s:e])
+                out[s:e] = rows.abs_().sum(1)
+            return out
+        gblock, w = parts["gblock"], self.width
+        for kk, sel in self._by_offset(k):
+            o = int(self.offsets[kk])
+            for s in range(0, sel.numel(), per):
+                idx = sel[s : s + per]
+                win = bank._gsum.index_select(0, t.index_select(0, idx))[:, :, o : o + w]
+                out[idx] = (win - gblock).abs_().sum(dim=(1, 2))
+        return out
 
     # -------------------------------------------------------------------- search
 
@@ -543,9 +573,9 @@ class TemplateMatcher:
             hint: a template id likely to match well (the current one); only speeds up.
             prune: skip work with the lower bounds (False: evaluate every pair).
             threshold: when given, the result is exact whenever the best mean error is at
-                most ``threshold``; otherwise ``(-1, 0, e)`` is returned where ``e`` is a
-                lower bound of the best error with ``e > threshold``. Much faster for
-                novel views.
+                most ``threshold``; otherwise ``(-1, 0, e)`` is returned, ``e`` a lower
+                bound of the best error with ``e > threshold`` (much faster for novel
+                views).
 
         Shape:
             view: ``(Y, X)``.
@@ -555,88 +585,77 @@ class TemplateMatcher:
             return -1, 0, math.inf
         kk = self.n_offsets
         dev = view.device
-        parts = self._view_parts(view)
         if not prune:
             err = self.errors(bank, view).reshape(-1)
-            i = int(torch.argmin(err))  # first minimum: lowest id, then lowest offset
-            return self._result(i // kk, i % kk, float(err[i]), threshold)
+            i = int(torch.argmin(err))  # the first minimum: lowest id, then lowest offset
+            best_err = float(err[i])
+            if threshold is not None and best_err > threshold:
+                return -1, 0, best_err
+            return i // kk, int(self.offsets[i % kk]), best_err
+        parts = self._view_parts(view)
+        # bounds and exact SADs are rounded differently: never prune within this margin
         margin = (1e-5 if view.dtype != torch.float64 else 1e-11) * self.npix
         cap = math.inf if threshold is None else threshold * self.npix
-        state = {"best": (math.inf, n, kk), "pruned": math.inf}
+        best = (math.inf, n, kk)  # (SAD, template id, offset index), lexicographic
+        pruned = math.inf  # least bound of everything skipped
 
         def cut() -> float:
-            return min(state["best"][0], cap) + margin
+            return min(best[0], cap) + margin
 
         def evaluate(t: torch.Tensor, k: torch.Tensor) -> None:
-            if t.numel() == 0:
-                return
-            sad = self.pair_sad(bank, parts, t, k)
-            m = sad.min()
-            key = torch.where(sad == m, t * kk + k, torch.full_like(t, n * kk)).min()
-            cand = (float(m), int(key) // kk, int(key) % kk)
-            state["best"] = min(state["best"], cand)
+            nonlocal best
+            if t.numel():
+                sad = self.pair_sad(bank, parts, t, k)
+                m = sad.min()
+                key = int(torch.where(sad == m, t * kk + k, torch.full_like(t, n * kk)).min())
+                best = min(best, (float(m), key // kk, key % kk))
 
-        def prune_by(bound: torch.Tensor) -> torch.Tensor:
-            keep = bound <= cut()
-            if not bool(keep.all()):
-                state["pruned"] = min(state["pruned"], float(bound[~keep].min()))
-            return keep
+        def keep(bound: torch.Tensor) -> torch.Tensor:
+            nonlocal pruned
+            ok = bound <= cut()
+            rest = bound[~ok]
+            if rest.numel():
+                pruned = min(pruned, float(rest.min()))
+            return ok
 
         all_k = torch.arange(kk, device=dev)
         if self.panoramic:
-            tb = self._template_bound(bank, parts)  # (N,)
+            tb = self.template_bound(bank, parts)  # (N,)
             seed = int(torch.argmin(tb))
         else:
-            wb = self._window_bound(bank, parts)  # (N, K)
+            wb = self.window_bound(bank, parts)  # (N, K)
             seed = int(torch.argmin(wb)) // kk
-        seeds = sorted({seed, hint} if 0 <= hint < n else {seed})
-        seed_t = torch.tensor(seeds, device=dev)
-        evaluate(seed_t.repeat_interleave(kk), all_k.repeat(seed_t.numel()))
+        seeds = torch.tensor(sorted({seed, hint} if 0 <= hint < n else {seed}), device=dev)
+        evaluate(seeds.repeat_interleave(kk), all_k.repeat(seeds.numel()))
         if self.panoramic:
-            ids = prune_by(tb).nonzero()[:, 0]
-            t = ids.repeat_interleave(kk)
-            k = all_k.repeat(ids.numel())
-            lb = tb[t]
+            ids = keep(tb).nonzero()[:, 0]
+            t, k = ids.repeat_interleave(kk), all_k.repeat(ids.numel())
+            lb = tb.index_select(0, t)
         else:
-            keep = prune_by(wb).nonzero()
-            t, k = keep[:, 0], keep[:, 1]
+            pairs = keep(wb).nonzero()
+            t, k = pairs[:, 0], pairs[:, 1]
             lb = wb[t, k]
         if t.numel():
-            lb = torch.maximum(lb, self._profile_bound(bank, parts, t, k))
-            keep = prune_by(lb)
-            lb, t, k = lb[keep], t[keep], k[keep]
+            lb = torch.maximum(lb, self.profile_bound(bank, parts, t, k))
+            ok = keep(lb)
+            lb, t, k = lb[ok], t[ok], k[ok]
         if t.numel():
             order = torch.argsort(lb, stable=True)
             lb, t, k = lb[order], t[order], k[order]
-            lb_host = lb.tolist() if lb.numel() <= 4096 else None
             s, size = 0, 16
-            per = max(64, CHUNK_ELEMENTS // max(1, self.npix))
+            per = max(64, CHUNK_ELEMENTS // (self.y_size * self.x_size))
             while s < t.numel():
-                first = lb_host[s] if lb_host is not None else float(lb[s])
+                first = float(lb[s])
                 if first > cut():
-                    state["pruned"] = min(state["pruned"], first)
+                    pruned = min(pruned, first)
                     break
                 e = min(s + size, t.numel())
-                ok = prune_by(lb[s:e])
+                ok = keep(lb[s:e])
                 evaluate(t[s:e][ok], k[s:e][ok])
                 s, size = e, min(size * 2, per)
-        best, tid, ki = state["best"]
-        if threshold is not None and best > cap:
-            low = min(best, state["pruned"])
-            return -1, 0, low / self.npix
-        return tid, int(self.offsets[ki]), best / self.npix
-
-    def _result(
-        self, tid: int, ki: int, err: float, threshold: float | None
-    ) -> tuple[int, int, float]:
-        if threshold is not None and err > threshold:
-            return -1, 0, err
-        return tid, int(self.offsets[ki]), err
-
-
-def _row_groups(x: torch.Tensor, groups: int = 4) -> list[torch.Tensor]:
-    """Split the rows (dim -2) into ``min(groups, rows)`` nearly equal groups."""
-    return list(torch.tensor_split(x, min(groups, x.shape[-2]), dim=-2))
+        if best[0] > cap:
+            return -1, 0, min(best[0], pruned) / self.npix
+        return best[1], int(self.offsets[best[2]]), best[0] / self.npix
 
 
 # --------------------------------------------------------------------- the modules
@@ -682,7 +701,7 @@ class _TemplateView:
             step=p.vt_step_match,
             device=self.device,
         )
-        self.bank = TemplateBank(y_size, x_size, dtype=self.dtype, device=self.device)
+        self.bank = self.matcher.make_bank(dtype=self.dtype, device=self.device)
 
     @property
     def template_shape(self) -> tuple[int, int] | None:

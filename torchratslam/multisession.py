@@ -432,7 +432,8 @@ def run_tour(
         (report["multi"]["experiences"] - n_s) / n_s if n_s else None
     )
     data: dict[str, Any] = {"single": single_state, "multi": multi, "groundtruth": gt,
-                            "offsets": offsets, "icp": ic, "world": getattr(tour, "world", None)}
+                            "offsets": offsets, "icp": ic,
+                            "session_starts": [float(full.times[a]) for a in starts], "world": getattr(tour, "world", None)}
     if ablation:
         abl = run_sessions(config, tour.sessions, offsets=offsets, shift_pose_cells=False,
                            progress=progress, max_frames=max_frames, **ratslam_kwargs)
@@ -469,4 +470,13 @@ def run_tour(
                 r["name"]: {k: r[k] for k in ("error", "initial_error", "ate_rmse_m", "time_s")}
                 for r in rows}})
         report["backends_after_merge"] = after
+        pg = _posegraph(final, config)
+        if pg.num_edges:
+            truth = interpolate_groundtruth(gt, final.exp_t)
+            rows = compare_backends(pg, list(backends), truth,
+                                    passes=config.experience_map.exp_loops,
+                                    correction=config.experience_map.exp_correction)
+            report["backends_final_map"] = {
+                r["name"]: {k: r[k] for k in ("error", "initial_error", "ate_rmse_m", "time_s")}
+                for r in rows}
     return {"report": report, "data": data}

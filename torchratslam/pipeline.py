@@ -249,6 +249,7 @@ class RatSLAM:
         self._exp: list[int] = []
         self._gt: list[tuple[float, float, float] | None] = []
         self._odo: list[tuple[float, float, float]] = []
+        self._pc: list[tuple[float, float, float]] = []
         self._last_t = 0.0
 
     # ------------------------------------------------------------------ module swapping
@@ -352,6 +353,7 @@ class RatSLAM:
         self._exp.append(exp_id)
         self._gt.append(None if frame.pose is None else tuple(float(v) for v in frame.pose))  # type: ignore[arg-type]
         self._odo.append(odo)
+        self._pc.append(pc)
         self._last_t = float(frame.t)
         n_t, n_e = counts if counts is not None else self.counts()[:2]
         return StepResult(index, float(frame.t), view, action, odo, pc, exp_id, n_t, n_e)
@@ -384,11 +386,15 @@ class RatSLAM:
                     "step() got no odometry but the odometry source is 'given'; pass "
                     "(vtrans, vrot, dt) or build RatSLAM(..., odometry='visual')"
                 )
-            odometry = (0.0, 0.0, 0.0)
         if isinstance(image, torch.Tensor):
             image = image.detach().cpu().numpy()
-        vtrans, vrot, dt = (float(v) for v in odometry)
-        t = self._last_t + dt if self.frame_index else 0.0
+        if odometry is None:  # the source estimates it; timestamps at the camera rate
+            vtrans, vrot, dt = 0.0, 0.0, 0.0
+            t = self._last_t + 1.0 / self.config.visual_odometry.camera_hz
+        else:
+            vtrans, vrot, dt = (float(v) for v in odometry)
+            t = self._last_t + dt
+        t = t if self.frame_index else 0.0
         frame = Frame(self.frame_index, t, np.asarray(image), vtrans=vtrans, vrot=vrot, dt=dt)
         return self.step_frame(frame)
 
@@ -620,6 +626,14 @@ class RatSLAM:
         dr = dead_reckoning(odo[:, 0], odo[:, 1], odo[:, 2])
         return ate_rmse(dr[:, :2], gt[:, :2])
 
+    def pc_log(self) -> np.ndarray:
+        """The pose-cell packet centre ``(x, y, th)`` in cells after each frame.
+
+        Shape:
+            returns ``(F, 3)``.
+        """
+        return np.asarray(self._pc, dtype=np.float64).reshape(-1, 3)
+
     def remap_experiences(self, old_to_new: np.ndarray) -> None:
         """Re-point the per-frame history at new experience ids (after a map merge).
 
@@ -640,4 +654,5 @@ class RatSLAM:
         self._exp.clear()
         self._gt.clear()
         self._odo.clear()
+        self._pc.clear()
         self.timings.reset()

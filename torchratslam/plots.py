@@ -3,9 +3,9 @@
 * :func:`plot_map` -- experiences and links of the experience map; with ground truth,
   the true path is rigidly aligned (SE(2), no scale) onto the map's per-frame
   trajectory and drawn underneath, so the picture shows the map's real error.
-* :func:`plot_pose_cells` -- the pose-cell activity; uses the pose-cell module's own
-  figure (``torchratslam.viz_pose_cells``) when it exists, else three max-projections
-  (x-y, x-theta, y-theta).
+* :func:`plot_pose_cells` -- the pose-cell activity and the packet's path; uses the
+  pose-cell module's own figure (``torchratslam.viz_pose_cells.plot_activity``), else
+  three max-projections (x-y, x-theta, y-theta).
 
 Both write a PNG with matplotlib's Agg backend (no display needed) atomically.
 """
@@ -127,29 +127,27 @@ def plot_map(
     return save_figure(fig, path)
 
 
-def plot_pose_cells(path: str | Path, activity: Any, *, title: str = "pose cells") -> Path:
-    """Draw the pose-cell activity.
+def plot_pose_cells(
+    path: str | Path, activity: Any, *, centres: Any = None, title: str = "pose cells"
+) -> Path:
+    """Draw the pose-cell activity (and the packet centre's path when given).
 
     Args:
         path: output PNG.
         activity: the activity, a tensor or array. Shape: ``(TH, Y, X)``.
+        centres: optional packet centres per frame, in cells. Shape: ``(T, 3)``.
         title: figure title.
 
     Returns:
         The written path.
     """
-    try:  # the pose-cell owner's figure, when available
-        from torchratslam import viz_pose_cells  # type: ignore[attr-defined]
-
-        fn = getattr(viz_pose_cells, "plot_activity", None) or getattr(
-            viz_pose_cells, "plot_pose_cells", None
-        )
-        if fn is not None:
-            out = fn(activity, path) if _accepts_path_second(fn) else None
-            if out is not None or Path(path).is_file():
-                return Path(path)
+    try:  # the pose-cell module's own figure
+        from torchratslam.viz_pose_cells import plot_activity
     except ImportError:
-        pass
+        plot_activity = None
+    if plot_activity is not None:
+        plot_activity(activity, path, centres=centres, title=title)
+        return Path(path)
     a = activity.detach().cpu().numpy() if hasattr(activity, "detach") else np.asarray(activity)
     a = np.asarray(a, dtype=np.float64)
     if a.ndim != 3:
@@ -167,13 +165,3 @@ def plot_pose_cells(path: str | Path, activity: Any, *, title: str = "pose cells
         ax.set_title(name, fontsize=9)
     fig.suptitle(f"{title} (TH, Y, X) = {tuple(a.shape)}")
     return save_figure(fig, path)
-
-
-def _accepts_path_second(fn: Any) -> bool:
-    import inspect
-
-    try:
-        params = list(inspect.signature(fn).parameters.values())
-    except (TypeError, ValueError):
-        return False
-    return len(params) >= 2 and params[1].name in ("path", "out", "filename", "file")

@@ -62,8 +62,14 @@ __all__ = [
     "pc_distance",
 ]
 
-METHODS = ("crop", "separable", "conv3d")
-"""Ways to compute the excitation/inhibition (see the module docstring)."""
+METHODS = ("auto", "crop", "separable", "conv3d")
+"""Ways to compute the excitation/inhibition (see the module docstring); ``"auto"``
+picks ``"crop"`` when a typical packet's box is at most ``crop_fraction`` of the
+network, else ``"separable"``."""
+
+TYPICAL_PACKET = (9, 7, 7)
+"""Non-zero extent (theta, y, x cells) of a settled packet with the default kernels,
+used by ``method="auto"`` to guess whether cropping pays."""
 
 RECENT_TEMPLATES = 10
 """Templates among the last this many learnt do not inject energy."""
@@ -166,7 +172,8 @@ class PoseCellNetwork(nn.Module):
         batch_size: number of independent networks ``B``.
         dtype: float32 (default) or float64.
         device: torch device.
-        method: ``"crop"`` (default), ``"separable"`` or ``"conv3d"`` (module docstring).
+        method: ``"auto"`` (default), ``"crop"``, ``"separable"`` or ``"conv3d"``
+            (module docstring).
         crop_fraction: ``"crop"`` falls back to the whole network (separable) in a step
             whose box holds more than this fraction of the cells.
 
@@ -190,7 +197,7 @@ class PoseCellNetwork(nn.Module):
         *,
         dtype: torch.dtype = torch.float32,
         device: Any = None,
-        method: str = "crop",
+        method: str = "auto",
         crop_fraction: float = 0.5,
     ) -> None:
         super().__init__()
@@ -204,7 +211,7 @@ class PoseCellNetwork(nn.Module):
             raise ConfigError(f"dtype must be torch.float32 or torch.float64, got {dtype}")
         self.params = params
         self.batch_size = int(batch_size)
-        self.method = method
+        self.requested_method = method
         self.crop_fraction = float(crop_fraction)
         xy, th = params.pc_dim_xy, params.pc_dim_th
         self.dims = (xy, xy, th)
@@ -212,10 +219,19 @@ class PoseCellNetwork(nn.Module):
         self._ki = gaussian_kernel_1d(params.pc_w_i_dim, params.pc_w_i_var)
         # cells the dynamics can reach: excitation, then inhibition of the excited activity
         self._reach = params.pc_w_e_dim // 2 + params.pc_w_i_dim // 2
+        if method == "auto":
+            box = [
+                min(e + 2 * (self._reach + 2), n)
+                for e, n in zip(TYPICAL_PACKET, (th, xy, xy), strict=True)
+            ]
+            small = box[0] * box[1] * box[2] <= self.crop_fraction * th * xy * xy
+            method = "crop" if small else "separable"
+        self.method = method
         self.register_buffer(
             "activity", torch.zeros(self.batch_size, th, xy, xy, dtype=dtype, device=device)
         )
         self._mats: dict[tuple[str, int, bool], torch.Tensor] = {}
+        self._work: torch.Tensor | None = None
         self._occ: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
         self._occ_key: tuple[int, int] | None = None
         self.last_crop: tuple[int, int, int] = (th, xy, xy)
@@ -338,8 +354,8 @@ class PoseCellNetwork(nn.Module):
         t = _as_batch(trans, b, "trans")
         r = _as_batch(rot, b, "rot")
         with torch.no_grad():
-            a = self._translate(activity, t, np.zeros(b, dtype=np.int64))
-            return self._rotate(a, r)
+            pool = [activity.clone(), torch.empty_like(activity), torch.empty_like(activity)]
+            return self._path_integrate(pool, t, r, np.zeros(b, dtype=np.int64)).clone()
 
     # ----------------------------------------------------------------- step
     def step(self, vtrans: Any, vrot: Any, dt: Any = 1.0) -> torch.Tensor:
@@ -377,14 +393,51 @@ class PoseCellNetwork(nn.Module):
         return self._best.clone()
 
     def _step_full(self, trans: np.ndarray, rot: np.ndarray) -> torch.Tensor:
-        a = self.inhibit(self.excite(self.activity))
-        a = self._finish_dynamics(a)
-        a = self._translate(a, trans, np.zeros(self.batch_size, dtype=np.int64))
-        a = self._rotate(a, rot)
+        if self.method == "conv3d":
+            a = self._finish_dynamics(self.inhibit(self.excite(self.activity)))
+            pool = [a, torch.empty_like(a), torch.empty_like(a)]
+        else:
+            pool = self._dynamics(self.activity, (True, True, True))
+        a = self._path_integrate(pool, trans, rot, np.zeros(self.batch_size, dtype=np.int64))
         self.activity.copy_(a)
         self._occ = None
         self.last_crop = tuple(self.activity.shape[1:])
         return torch.argmax(self.activity.reshape(self.batch_size, -1), dim=1)
+
+    def _workspace(self, shape: tuple[int, ...], count: int) -> list[torch.Tensor]:
+        """``count`` scratch tensors of ``shape``, carved from one reused allocation
+        (a large step would otherwise allocate, and page-fault, a dozen big tensors)."""
+        n = int(np.prod(shape))
+        if self._work is None or self._work.numel() < n * count:
+            self._work = torch.empty(n * count, dtype=self.dtype, device=self.device)
+        return [self._work[i * n : (i + 1) * n].view(shape) for i in range(count)]
+
+    def _dynamics(self, a: torch.Tensor, circ: tuple[bool, bool, bool]) -> list[torch.Tensor]:
+        """Excite, inhibit, global inhibition, clamp, normalise ``a`` (B, T, Y, X) with
+        the separable kernels; ``circ`` per axis (th, y, x) says whether it wraps.
+
+        Returns:
+            Four workspace tensors of ``a``'s shape, the first holding the result.
+        """
+        b, t, y, x = a.shape
+        out, s1, s2, e = self._workspace((b, t, y, x), 4)
+        for which, src, dst in (("e", a, e), ("i", e, out)):
+            mt = self._matrix(which, t, circ[0])
+            my = self._matrix(which, y, circ[1])
+            mx = self._matrix(which, x, circ[2])
+            torch.matmul(src, mx.T, out=s1)
+            torch.matmul(my, s1, out=s2)
+            torch.matmul(mt, s2.view(b, t, y * x), out=dst.view(b, t, y * x))
+        torch.sub(e, out, out=out)
+        out.sub_(self.params.pc_global_inhib).clamp_min_(0.0)
+        total = out.sum(dim=(1, 2, 3), keepdim=True)
+        if not bool((total > 0).all()):
+            raise InputError(
+                "pose-cell activity died out (every cell <= pc_global_inhib); lower "
+                "pc_global_inhib or reset()/inject() the network"
+            )
+        out.div_(total)
+        return [out, s1, s2, e]
 
     def _finish_dynamics(self, a: torch.Tensor) -> torch.Tensor:
         a = torch.clamp_min(a - self.params.pc_global_inhib, 0.0)
@@ -396,12 +449,14 @@ class PoseCellNetwork(nn.Module):
             )
         return a / total
 
-    def _shift_axis(self, a: torch.Tensor, shift: np.ndarray, axis: int) -> torch.Tensor:
-        """Move the content of ``a`` by ``shift`` cells along ``axis``, wrapping on the
-        tensor's own length: integer part by a gather, fraction by linear weights.
+    def _shift_axis(self, pool: list[torch.Tensor], shift: np.ndarray, axis: int) -> None:
+        """Move the content of ``pool[0]`` by ``shift`` cells along ``axis``, wrapping on
+        the tensor's own length: integer part by a gather, fraction by linear weights.
+        The result becomes ``pool[0]`` (the other entries are scratch of the same shape).
 
         ``shift`` is ``(B,)`` (theta) or ``(B, T)`` (one shift per theta layer).
         """
+        a, g0, g1 = pool[0], pool[1], pool[2]
         n = a.shape[axis]
         fl = np.floor(shift)
         frac = shift - fl
@@ -409,27 +464,31 @@ class PoseCellNetwork(nn.Module):
         shape[axis] = n
         lead = shift.shape + (1,) * (4 - shift.ndim)
         idx = np.remainder(np.arange(n).reshape(shape) - fl.astype(np.int64).reshape(lead), n)
-        idx_t = torch.from_numpy(idx).to(a.device).expand(a.shape)
-        w = torch.from_numpy(frac.reshape(lead)).to(device=a.device, dtype=a.dtype)
-        g = torch.gather(a, axis, idx_t)
-        return g + w * (torch.roll(g, 1, dims=axis) - g)
+        dev = a.device
+        torch.gather(a, axis, torch.from_numpy(idx).to(dev).expand(a.shape), out=g0)
+        if frac.any():
+            idx1 = torch.from_numpy(np.remainder(idx - 1, n)).to(dev)
+            torch.gather(a, axis, idx1.expand(a.shape), out=g1)
+            w = torch.from_numpy(frac.reshape(lead)).to(device=dev, dtype=a.dtype)
+            torch.lerp(g0, g1, w, out=g0)
+        pool[0], pool[1] = g0, a
 
-    def _translate(self, a: torch.Tensor, trans: np.ndarray, th_start: np.ndarray) -> torch.Tensor:
-        """Shift every theta layer along its heading (layer ``k`` of ``a`` is global layer
-        ``th_start + k``) by ``trans`` cells (negative: backwards)."""
-        if not trans.any():
-            return a
-        n_th = self.dims[2]
-        k = (th_start[:, None] + np.arange(a.shape[1])[None, :]) % n_th
-        direction = k * (2.0 * math.pi / n_th) + np.where(trans < 0, math.pi, 0.0)[:, None]
-        mag = np.abs(trans)[:, None]
-        a = self._shift_axis(a, mag * np.cos(direction), 3)
-        return self._shift_axis(a, mag * np.sin(direction), 2)
-
-    def _rotate(self, a: torch.Tensor, rot: np.ndarray) -> torch.Tensor:
-        if not rot.any():
-            return a
-        return self._shift_axis(a, rot, 1)
+    def _path_integrate(
+        self, pool: list[torch.Tensor], trans: np.ndarray, rot: np.ndarray, th_start: np.ndarray
+    ) -> torch.Tensor:
+        """Translate every theta layer (layer ``k`` of ``pool[0]`` is global layer
+        ``th_start + k``) along its heading by ``trans`` cells (negative: backwards),
+        then shift theta by ``rot`` cells. Returns the result (one of ``pool``)."""
+        if trans.any():
+            n_th = self.dims[2]
+            k = (th_start[:, None] + np.arange(pool[0].shape[1])[None, :]) % n_th
+            direction = k * (2.0 * math.pi / n_th) + np.where(trans < 0, math.pi, 0.0)[:, None]
+            mag = np.abs(trans)[:, None]
+            self._shift_axis(pool, mag * np.cos(direction), 3)
+            self._shift_axis(pool, mag * np.sin(direction), 2)
+        if rot.any():
+            self._shift_axis(pool, rot, 1)
+        return pool[0]
 
     def _occupancy(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Which theta / y / x indices hold non-zero activity, ``(B, n)`` each (cached
@@ -479,13 +538,8 @@ class PoseCellNetwork(nn.Module):
         flat = torch.from_numpy(flat_np.reshape(b, -1)).to(self.device)
         act = self.activity.view(b, -1)
         crop = torch.gather(act, 1, flat).view(b, lt, ly, lx)
-        ctup = (circ[0], circ[1], circ[2])
-        e = self._conv_sep(crop, "e", ctup)
-        a = e - self._conv_sep(e, "i", ctup)
-        a = self._finish_dynamics(a)
-        a = self._translate(a, trans, starts[0])
-        a = self._rotate(a, rot)
-        a = a.reshape(b, -1)
+        pool = self._dynamics(crop, (circ[0], circ[1], circ[2]))
+        a = self._path_integrate(pool, trans, rot, starts[0]).reshape(b, -1)
         act.scatter_(1, flat, a)
         # the new occupancy, from the crop (every other cell is zero)
         nz = (a != 0).cpu().numpy().reshape(b, lt, ly, lx)
@@ -615,7 +669,7 @@ class PoseCells:
         *,
         dtype: torch.dtype = torch.float32,
         device: Any = None,
-        method: str = "crop",
+        method: str = "auto",
     ) -> None:
         self.params = params if params is not None else PoseCellParams()
         self.network = PoseCellNetwork(self.params, 1, dtype=dtype, device=device, method=method)

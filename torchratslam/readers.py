@@ -8,7 +8,8 @@ visual odometry). Frames are read lazily, one at a time.
 * :class:`DirectoryReader` -- ``frames/`` (images sorted by file name),
   ``odometry.csv`` (header with ``t``, ``vtrans`` m/s, ``vrot`` rad/s; row k is the
   velocity over the interval that ends at row k's ``t``; other columns are ignored),
-  optional ``groundtruth.csv`` (``t, x, y, theta``). This is what
+  optional ``groundtruth.csv`` (``t, x, y, theta``), optional ``meta.json`` (its
+  ``camera.columns`` saying "counter-clockwise" sets ``mirrored``). This is what
   ``torchratslam.sim.write_dataset`` writes.
 * :class:`VideoReader` -- a video file plus an optional odometry CSV (same format,
   one row per video frame); without it, timestamps come from the video's frame rate
@@ -32,6 +33,7 @@ timestamps and values) raise :class:`~graph.errors.InputError` naming the file.
 from __future__ import annotations
 
 import csv
+import json
 import math
 from collections.abc import Iterator
 from pathlib import Path
@@ -164,6 +166,8 @@ class Reader:
 
     name: str = "data"
     has_odometry: bool = True
+    mirrored: bool = False
+    """True when image columns turn counter-clockwise (the simulator's panoramas)."""
 
     def frames(self) -> Iterator[Frame]:  # pragma: no cover - abstract
         raise NotImplementedError
@@ -180,6 +184,17 @@ class Reader:
 
 
 # ----------------------------------------------------------------------------- directory
+def _read_meta(path: Path) -> dict[str, Any]:
+    """The optional ``meta.json`` of a dataset directory (``{}`` when absent)."""
+    if not path.is_file():
+        return {}
+    try:
+        data = json.loads(path.read_text())
+    except (OSError, ValueError) as exc:
+        raise InputError(f"{path}: not valid JSON ({exc}); fix or delete it") from None
+    return data if isinstance(data, dict) else {}
+
+
 class DirectoryReader(Reader):
     """A dataset directory: ``frames/``, ``odometry.csv``, optional ``groundtruth.csv``.
 
@@ -228,6 +243,9 @@ class DirectoryReader(Reader):
             self.has_odometry = False
         gt = self.path / "groundtruth.csv"
         self._gt = read_groundtruth_csv(gt) if gt.is_file() else None
+        self.meta = _read_meta(self.path / "meta.json")
+        camera = self.meta.get("camera") if isinstance(self.meta.get("camera"), dict) else {}
+        self.mirrored = "counter-clockwise" in str(camera.get("columns", ""))
 
     def __len__(self) -> int:
         return len(self.files)

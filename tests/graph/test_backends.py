@@ -8,6 +8,7 @@ import pytest
 
 from graph.align import align_se2, apply_se2, ate_rmse, umeyama_se2
 from graph.backends import GraphErrorEvaluator, make_backend
+from graph.backends import alpha as alpha_module
 from graph.backends.alpha import AlphaBackend, EdgeColouring, dependency_levels, reference_order
 from graph.compare import compare_backends, format_table
 from graph.errors import ConfigError, GraphError, InputError
@@ -81,8 +82,17 @@ def test_reference_backend_is_the_reference_loop(w100):
     np.testing.assert_allclose(ours, _sequential_alpha(w100, order, 3), atol=1e-12)
 
 
+@pytest.fixture(params=["vectorised", "scalar"])
+def kernel(request, monkeypatch):
+    """Run a test with the numpy kernel and with the small-graph Python kernel."""
+    monkeypatch.setattr(
+        alpha_module, "SCALAR_EDGES_PER_CLASS", 0 if request.param == "vectorised" else 10**9
+    )
+    return request.param
+
+
 @pytest.mark.parametrize("seed", range(4))
-def test_level_schedule_reproduces_the_reference_exactly(seed):
+def test_level_schedule_reproduces_the_reference_exactly(seed, kernel):
     pg, _ = _random_graph(np.random.default_rng(seed))
     ref = make_backend("alpha_reference").relax(pg, passes=40, correction=0.5)
     fast = make_backend("alpha", schedule="reference").relax(pg, passes=40, correction=0.5)
@@ -94,7 +104,7 @@ def test_level_schedule_reproduces_the_reference_exactly(seed):
 
 
 @pytest.mark.parametrize("correction", [0.5, 0.25])
-def test_colour_schedule_is_a_gauss_seidel_sweep_in_colour_order(correction):
+def test_colour_schedule_is_a_gauss_seidel_sweep_in_colour_order(correction, kernel):
     pg, _ = _random_graph(np.random.default_rng(7), n=40, loops=30)
     backend = AlphaBackend()
     fast = backend.relax(pg, passes=25, correction=correction)
@@ -127,7 +137,7 @@ def test_dependency_levels_respect_the_reference_order(w100):
 
 
 @pytest.mark.parametrize("seed", range(3))
-def test_both_alphas_reach_the_same_fixed_point_on_consistent_graphs(seed):
+def test_both_alphas_reach_the_same_fixed_point_on_consistent_graphs(seed, kernel):
     # noise-free measurements: every fixed point satisfies every link
     pg, truth = _random_graph(np.random.default_rng(seed), noise=0.0)
     ref = make_backend("alpha_reference").relax(pg, passes=400)
@@ -138,7 +148,8 @@ def test_both_alphas_reach_the_same_fixed_point_on_consistent_graphs(seed):
     assert ate_rmse(fast, ref) < 1e-6 and ate_rmse(fast, truth) < 1e-6
 
 
-def test_w100_fixed_points(w100):
+def test_w100_fixed_points(w100, monkeypatch):
+    monkeypatch.setattr(alpha_module, "SCALAR_EDGES_PER_CLASS", 0)  # the numpy kernel
     ev = GraphErrorEvaluator(w100)
     ref = make_backend("alpha_reference").relax(w100, passes=300)
     assert ev(ref) == pytest.approx(W100_ALPHA_FIXED_POINT, rel=0.01)
@@ -206,7 +217,7 @@ def test_alpha_leaves_the_graph_alone_and_handles_empty_graphs(w100):
         np.testing.assert_array_equal(make_backend(name).relax(lone, passes=3), lone.poses)
 
 
-def test_alpha_grows_with_the_graph_like_a_fresh_backend(w100):
+def test_alpha_grows_with_the_graph_like_a_fresh_backend(w100, kernel):
     online = make_backend("alpha")
     first = w100.subgraph(20)
     np.testing.assert_allclose(

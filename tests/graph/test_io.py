@@ -204,7 +204,9 @@ def test_initial_estimate_from_odometry_instead_of_vertices():
     from_file = read_posegraph(path)
     odo = read_posegraph(path, initial="odometry")
     np.testing.assert_array_equal(odo.edges, from_file.edges)
-    expect = compose_odometry(100, from_file.edges, from_file.measurements, start=from_file.poses[0])
+    expect = compose_odometry(
+        100, from_file.edges, from_file.measurements, start=from_file.poses[0]
+    )
     np.testing.assert_allclose(odo.poses, expect)
     # every odometry edge is then satisfied exactly
     chain = np.abs(odo.edges[:, 0] - odo.edges[:, 1]) == 1

@@ -93,20 +93,8 @@ def test_compare_backends_on_a_saved_state_and_a_g2o_file(run_out, tmp_path, cap
     pytest.importorskip("graph.compare")
     _, out, _ = run_out
     js = tmp_path / "cmp.json"
-    assert (
-        main(
-            [
-                "compare-backends",
-                "--map",
-                str(out / "state"),
-                "--backends",
-                "alpha,gtsam",
-                "--json",
-                str(js),
-            ]
-        )
-        == 0
-    )
+    argv = ["compare-backends", "--json", str(js)]
+    assert main([*argv, "--map", str(out / "state"), "--backends", "alpha,gtsam"]) == 0
     rows = json.loads(js.read_text())
     assert [r["name"] for r in rows] == ["alpha", "gtsam"]
     assert all("time_s" in r and "error" in r for r in rows)
@@ -121,22 +109,7 @@ def test_compare_backends_on_a_saved_state_and_a_g2o_file(run_out, tmp_path, cap
     write_g2o(pg, g2o)
     gt = tmp_path / "gt.txt"
     np.savetxt(gt, pg.poses)
-    assert (
-        main(
-            [
-                "compare-backends",
-                "--map",
-                str(g2o),
-                "--groundtruth",
-                str(gt),
-                "--backends",
-                "alpha",
-                "--json",
-                str(js),
-            ]
-        )
-        == 0
-    )
+    assert main([*argv, "--map", str(g2o), "--groundtruth", str(gt), "--backends", "alpha"]) == 0
     assert json.loads(js.read_text())[0]["ate_rmse_m"] is not None
 
 
@@ -150,46 +123,23 @@ def _fails(argv, capsys, match):
 
 def test_cli_fails_cleanly_on_bad_input(tmp_path, capsys, run_out):
     _, _, cfg = run_out
-    out = str(tmp_path / "o")
-    _fails(
-        ["run", "--config", str(cfg), "--data", str(tmp_path / "missing"), "--out", out],
-        capsys,
-        "not found",
-    )
-    _fails(
-        ["run", "--config", str(tmp_path / "nope.yaml"), "--data", SIM, "--out", out],
-        capsys,
-        "not found",
-    )
     bad = tmp_path / "bad.yaml"
     bad.write_text("pc_dim_xyz: 3\n")
-    _fails(
-        ["run", "--config", str(bad), "--data", SIM, "--out", out],
-        capsys,
-        "did you mean 'pc_dim_xy'",
-    )
-    _fails(
-        ["run", "--config", str(cfg), "--data", SIM, "--out", out, "--max-frames", "0"],
-        capsys,
-        "--max-frames",
-    )
-    _fails(
-        ["run", "--config", str(cfg), "--data", "sim:nowhere", "--out", out],
-        capsys,
-        "unknown simulator tour",
-    )
-    _fails(
-        ["run", "--config", str(cfg), "--data", SIM, "--out", out, "--set", "exp_loops"],
-        capsys,
-        "KEY=VALUE",
-    )
     (tmp_path / "d" / "frames").mkdir(parents=True)
-    _fails(
-        ["run", "--config", str(cfg), "--data", str(tmp_path / "d"), "--out", out],
-        capsys,
-        "no images",
-    )
+    run = ["run", "--out", str(tmp_path / "o")]
+    cases = [
+        (["--config", str(cfg), "--data", str(tmp_path / "missing")], "not found"),
+        (["--config", str(tmp_path / "nope.yaml"), "--data", SIM], "not found"),
+        (["--config", str(bad), "--data", SIM], "did you mean 'pc_dim_xy'"),
+        (["--config", str(cfg), "--data", SIM, "--max-frames", "0"], "--max-frames"),
+        (["--config", str(cfg), "--data", "sim:nowhere"], "unknown simulator tour"),
+        (["--config", str(cfg), "--data", SIM, "--set", "exp_loops"], "KEY=VALUE"),
+        (["--config", str(cfg), "--data", str(tmp_path / "d")], "no images"),
+    ]
+    for argv, match in cases:
+        _fails([*run, *argv], capsys, match)
     _fails(["compare-backends", "--map", str(tmp_path / "none.g2o")], capsys, "not found")
+    _fails(["compare-backends", "--map", str(tmp_path / "d")], capsys, "")
 
 
 def test_run_on_a_written_dataset_directory(tmp_path, run_out, capsys):
@@ -202,6 +152,9 @@ def test_run_on_a_written_dataset_directory(tmp_path, run_out, capsys):
     assert main([*argv, "--out", str(out), "--max-frames", "10"]) == 0
     m = json.loads((out / "metrics.json").read_text())
     assert m["frames"] == 10 and m["odometry"] == "given" and "ate_rmse_m" in m
+    from torchratslam.readers import open_data
+
+    assert open_data(data).mirrored  # meta.json: the simulator's columns turn CCW
     # without odometry.csv the run switches to visual odometry and says so
     (data / "odometry.csv").unlink()
     capsys.readouterr()
@@ -222,3 +175,17 @@ def test_run_with_load_merges_into_the_stored_map(run_out, tmp_path):
     # the same route again: its first view is a stored place, so the session merges at once
     assert m["merges"] and m["merges"][0]["frame"] == 0 and m["merges"][0]["map"] == 0
     assert m["experiences"] >= first["experiences"] and m["loaded"] == [str(out / "state")]
+
+
+def test_bag_topics_come_from_options_then_topic_root_then_irat_defaults():
+    import argparse
+
+    from torchratslam.cli.run import _topics
+    from torchratslam.config import load_config
+
+    none = argparse.Namespace(image_topic=None, odom_topic=None)
+    assert _topics(none, load_config()) == ("/irat_red/camera/image/compressed", "/irat_red/odom")
+    cfg = load_config(None, topic_root="stlucia")
+    assert _topics(none, cfg) == ("/stlucia/camera/image/compressed", "/stlucia/odom")
+    given = argparse.Namespace(image_topic="/cam", odom_topic=None)
+    assert _topics(given, cfg) == ("/cam", "/stlucia/odom")

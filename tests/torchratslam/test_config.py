@@ -139,3 +139,9 @@ def test_configs_are_frozen_and_replace_validates():
     assert cfg.replace(pc_dim_xy=31).pose_cells.pc_dim_xy == 31
     with pytest.raises(ConfigError):
         cfg.replace(pc_dim_xy=0)
+
+
+def test_modules_are_chosen_by_name_in_the_config():
+    cfg = load_config(local_view="features", odometry="visual", experience_map="mine")
+    assert cfg.general.local_view == "features" and cfg.general.odometry == "visual"
+    assert cfg.general.experience_map == "mine" and cfg.general.pose_cells == "ratslam"

@@ -365,7 +365,7 @@ def _raycast(x, y, th, n=682, fov_deg=240.0, rmax=30.0):
     return np.minimum(r, rmax)
 
 
-def corridor_lap(seed: int, step: float = 0.25):
+def corridor_lap(seed: int, step: float = 0.4):
     """One lap of the loop as Frames with 682-beam front/rear scans and noisy odometry."""
     rng = np.random.default_rng(seed)
     corners = np.array([[0, 0], [20, 0], [20, 8], [0, 8], [0, 0]], float)
@@ -388,7 +388,7 @@ def corridor_lap(seed: int, step: float = 0.25):
 @pytest.fixture(scope="module")
 def corridor_run():
     laps = [corridor_lap(seed) for seed in range(4)]
-    return run_mbaram(laps[:3], laps[3:], MBARAMParams(laser_scale=3.0))
+    return run_mbaram(laps[:3], laps[3:], MBARAMParams(laser_scale=3.0, s_max_odometry=1e-4))
 
 
 def test_corridor_loop_map_converges_and_localises(corridor_run):

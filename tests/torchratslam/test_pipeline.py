@@ -1,6 +1,8 @@
 """The pipeline: per-frame order, registries, pipelined == sequential, and end to end on
 a short simulated loop (the map closes the loop: ATE well below dead reckoning)."""
 
+import math
+
 import numpy as np
 import pytest
 import torch
@@ -298,6 +300,7 @@ def test_end_to_end_the_loop_closes(sequential_run, loop_frames):
         traj[:, 3:], np.asarray(slam.experience_map.poses)[traj[:, 2].astype(int)]
     )
     assert slam.templates.shape[0] == result.templates and slam.activity.ndim == 3
+    assert slam.pc_log().shape == (len(loop_frames), 3)
     assert slam.graph.number_of_nodes() == result.experiences
 
 
@@ -331,3 +334,20 @@ def test_remap_experiences_repoints_the_history():
     slam.remap_experiences(mapping)
     after = slam.trajectory()[:, 2].astype(int)
     assert [mapping[i] for i in before] == after.tolist()
+
+
+def test_step_with_visual_odometry_estimates_the_turn():
+    from torchratslam.visual_odometry import VisualOdometry
+
+    cfg = RatSLAMConfig().replace(camera_fov_deg=360.0, camera_hz=2.0)
+    slam = RatSLAM(
+        cfg,
+        local_view=FakeView(cfg.local_view),
+        pose_cells=FakePoseCells(cfg.pose_cells),
+        odometry=VisualOdometry(cfg.visual_odometry),
+    )
+    img = (np.random.default_rng(0).random((8, 360)) * 255).astype(np.uint8)
+    slam.step(img)
+    r = slam.step(np.roll(img, 4, axis=1))
+    assert r.odometry[1] == pytest.approx(math.radians(4.0) * 2.0)
+    assert r.odometry[2] == pytest.approx(0.5) and r.t == pytest.approx(0.5)

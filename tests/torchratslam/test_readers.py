@@ -235,3 +235,27 @@ def test_bag_reader_errors(tmp_path):
     (tmp_path / "x.txt").write_text("hi")
     with pytest.raises(InputError, match="unknown kind"):
         open_data(tmp_path / "x.txt")
+
+
+def test_raw_image_encodings_decode_to_grey_or_bgr():
+    from types import SimpleNamespace
+
+    from torchratslam.readers import _decode_image
+
+    rng = np.random.default_rng(5)
+    bgr = (rng.random((5, 7, 3)) * 255).astype(np.uint8)
+    grey = cv2.cvtColor(bgr, cv2.COLOR_BGR2GRAY)
+    padded = np.concatenate([bgr.reshape(5, 21), np.zeros((5, 3), np.uint8)], axis=1)  # step 24
+
+    def msg(enc, data, step):
+        return SimpleNamespace(encoding=enc, height=5, width=7, step=step, data=data.ravel())
+
+    t = "sensor_msgs/msg/Image"
+    assert np.array_equal(_decode_image(msg("bgr8", padded, 24), t, True, "/c"), bgr)
+    assert np.array_equal(_decode_image(msg("bgr8", padded, 24), t, False, "/c"), grey)
+    rgb = bgr[:, :, ::-1].reshape(5, 21)
+    assert np.array_equal(_decode_image(msg("rgb8", rgb, 21), t, True, "/c"), bgr)
+    with pytest.raises(InputError, match="not supported"):
+        _decode_image(msg("32FC1", padded, 24), t, False, "/c")
+    with pytest.raises(InputError, match="shorter"):
+        _decode_image(msg("mono8", padded[:2], 24), t, False, "/c")

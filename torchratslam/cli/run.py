@@ -114,16 +114,19 @@ def register(subparsers: Any) -> argparse.ArgumentParser:
     )
     p.add_argument(
         "--image-topic",
-        default="/irat_red/camera/image/compressed",
+        default=None,
         metavar="TOPIC",
-        help="image topic of a .bag (CompressedImage or Image), "
+        help="image topic of a .bag (CompressedImage or Image; default "
+        "/<topic_root>/camera/image/compressed with the config's topic_root, else the "
+        "iRat's /irat_red/camera/image/compressed), "
         "e.g. --image-topic /stlucia/camera/image/compressed",
     )
     p.add_argument(
         "--odom-topic",
-        default="/irat_red/odom",
+        default=None,
         metavar="TOPIC",
-        help="nav_msgs/Odometry topic of a .bag, e.g. --odom-topic /irat_red/odom",
+        help="nav_msgs/Odometry topic of a .bag (default /<topic_root>/odom, else "
+        "/irat_red/odom), e.g. --odom-topic /irat_red/odom",
     )
     p.add_argument(
         "--device",
@@ -142,6 +145,24 @@ def register(subparsers: Any) -> argparse.ArgumentParser:
     p.add_argument("--no-progress", action="store_true", help="no progress bar, e.g. --no-progress")
     p.set_defaults(func=main)
     return p
+
+
+def _mirrored(data: Any) -> bool:
+    """Whether the data's image columns turn counter-clockwise (the simulator's panoramas)."""
+    if hasattr(data, "mirrored"):
+        return bool(data.mirrored)
+    camera = getattr(data, "camera", None)
+    return getattr(camera, "kind", None) == "panoramic"
+
+
+def _topics(args: argparse.Namespace, config: Any) -> tuple[str, str]:
+    """Bag topics: the options, else the config's ``topic_root``, else the iRat's."""
+    from torchratslam.readers import IRAT_IMAGE_TOPIC, IRAT_ODOM_TOPIC
+
+    root = str(getattr(config.general, "topic_root", "") or "").strip("/")
+    image = args.image_topic or (f"/{root}/camera/image/compressed" if root else IRAT_IMAGE_TOPIC)
+    odom = args.odom_topic or (f"/{root}/odom" if root else IRAT_ODOM_TOPIC)
+    return image, odom
 
 
 def _overrides(items: list[str]) -> dict[str, str]:
@@ -250,7 +271,8 @@ def write_outputs(
         world=getattr(data, "world", None),
         title=str(extra.get("data", "experience map")),
     )
-    plot_pose_cells(out / "pose_cells.png", slam.activity)
+    centres = slam.pc_log() if hasattr(slam, "pc_log") else None
+    plot_pose_cells(out / "pose_cells.png", slam.activity, centres=centres)
     from torchratslam.state import save_state
 
     save_state(slam, out / "state")
@@ -286,16 +308,21 @@ def main(args: argparse.Namespace) -> int:
     if args.backend:
         overrides["exp_backend"] = args.backend
     config = load_config(args.config, **overrides)
+    image_topic, odom_topic = _topics(args, config)
     data = open_data(
         args.data,
         odometry=args.odometry,
         groundtruth=args.groundtruth,
-        image_topic=args.image_topic,
-        odom_topic=args.odom_topic,
+        image_topic=image_topic,
+        odom_topic=odom_topic,
     )
-    odometry: str | None = None  # the config's choice (default: the data's odometry)
+    odometry: Any = None  # the config's choice (default: the data's odometry)
+    odometry_label = None
     if args.visual_odometry or not getattr(data, "has_odometry", True):
-        odometry = "visual"
+        from torchratslam.visual_odometry import VisualOdometry
+
+        odometry = VisualOdometry(config.visual_odometry, mirrored=_mirrored(data))
+        odometry_label = "visual"
         if not args.visual_odometry:
             print(
                 f"torchratslam run: {args.data} has no odometry; using visual odometry",
@@ -319,6 +346,8 @@ def main(args: argparse.Namespace) -> int:
     if result.frames == 0:
         raise InputError(f"{args.data}: no frames were read; check the dataset")
     extra = {"data": str(args.data), "config": str(args.config)}
+    if odometry_label:
+        extra["odometry"] = odometry_label
     if args.load:
         extra["loaded"] = [str(p) for p in args.load]
     metrics = write_outputs(slam, out, result, data=data, extra=extra)
