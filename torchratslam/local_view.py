@@ -46,6 +46,7 @@ minimum.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -70,6 +71,8 @@ STATE_VERSION = 1
 CHUNK_ELEMENTS = 1 << 19
 # Groups of rows whose column sums give the matcher's lower bounds.
 GROUPS = 4
+# Blocks of columns of the coarse profile bound.
+BLOCKS = 8
 
 
 # --------------------------------------------------------------------------- input
@@ -218,15 +221,14 @@ class TemplateBank:
     """All templates in one preallocated tensor that grows by doubling.
 
     Row ``i`` holds template id ``i``. Per template the bank also keeps its mean, its
-    creation frame and the small summaries the matcher's lower bounds use: the column
-    sums of ``G = min(4, Y)`` groups of rows (``gsum``, ``(G, X)``), and either these
-    sorted along the columns (``gsort``, panoramic) or their cumulative sums (``gcum``,
-    ``(G, X + 1)``, normal mode).
+    creation frame and any small summaries a matcher asks for (computed once, when the
+    template is added; see :meth:`TemplateMatcher.make_bank`).
 
     Args:
         y_size: template height (rows).
         x_size: template width (columns).
-        panoramic: which summaries to keep (see above).
+        summaries: function computing the summaries of a batch ``(K, Y, X)`` of templates.
+        summary_shapes: name -> per-template shape of each summary.
         capacity: initial number of rows.
         dtype: template dtype.
         device: template device.
@@ -237,7 +239,8 @@ class TemplateBank:
         y_size: int,
         x_size: int,
         *,
-        panoramic: bool = False,
+        summaries: Callable[[torch.Tensor], dict[str, torch.Tensor]] | None = None,
+        summary_shapes: dict[str, tuple[int, ...]] | None = None,
         capacity: int = 64,
         dtype: torch.dtype = torch.float32,
         device: torch.device | str | None = None,
@@ -245,21 +248,15 @@ class TemplateBank:
         if y_size <= 0 or x_size <= 0:
             raise ConfigError(f"template size must be positive, got {x_size}x{y_size}")
         self.y_size, self.x_size = int(y_size), int(x_size)
-        self.groups = min(GROUPS, self.y_size)
-        self.panoramic = bool(panoramic)
+        self._summarise = summaries
+        self._summary_shapes = dict(summary_shapes or {})
         self.dtype, self.device = dtype, torch.device(device) if device is not None else None
         self._n = 0
         self._capacity = 0
         self._alloc(max(1, int(capacity)))
 
     def _shapes(self) -> dict[str, tuple[int, ...]]:
-        y, x, g = self.y_size, self.x_size, self.groups
-        shapes = {"data": (y, x), "means": (), "gsum": (g, x)}
-        if self.panoramic:
-            shapes["gsort"] = (g, x)
-        else:
-            shapes["gcum"] = (g, x + 1)
-        return shapes
+        return {"data": (self.y_size, self.x_size), "means": (), **self._summary_shapes}
 
     def _alloc(self, capacity: int) -> None:
         for name, shape in self._shapes().items():
@@ -336,22 +333,14 @@ class TemplateBank:
         sl = slice(self._n, self._n + k)
         self._data[sl] = t
         self._means[sl] = t.mean(dim=(1, 2))
-        gsum = _group_sums(t, self.groups)  # (K, G, X)
-        self._gsum[sl] = gsum
-        if self.panoramic:
-            self._gsort[sl] = gsum.sort(-1).values
-        else:
-            self._gcum[sl, :, 1:] = gsum.cumsum(-1)
+        if self._summarise is not None:
+            for name, value in self._summarise(t).items():
+                getattr(self, "_" + name)[sl] = value
         if frames is None:
             frames = -1
         self._frames[sl] = torch.as_tensor(frames, dtype=torch.int64, device=self.device)
         self._n += k
         return range(self._n - k, self._n)
-
-
-def _group_sums(x: torch.Tensor, groups: int) -> torch.Tensor:
-    """Column sums of ``groups`` nearly equal groups of rows: ``(..., Y, X) -> (..., G, X)``."""
-    return torch.stack([g.sum(-2) for g in torch.tensor_split(x, groups, dim=-2)], dim=-2)
 
 
 # ------------------------------------------------------------------------- matcher
@@ -418,29 +407,91 @@ class TemplateMatcher:
         self.npix = y_size * self.width
         # panoramic: the view rolled so that its column c - o faces template column c
         cols = torch.arange(x_size)
-        self._roll = ((cols[None, :] - offs[:, None]) % x_size).to(device)  # (K, X)
+        roll = (cols[None, :] - offs[:, None]) % x_size  # (K, X): view column facing c
+        self._roll_flat = (
+            (torch.arange(y_size)[None, :, None] * x_size + roll[:, None, :]).reshape(-1).to(device)
+        )
+        self.blocks = nb = min(BLOCKS, self.width)
+        # 0/1 matrices: row groups (G, Y); column blocks of the compared width (W, B)
+        groups = torch.zeros(self.groups, y_size, dtype=torch.float64)
+        for i, rows in enumerate(torch.tensor_split(torch.arange(y_size), self.groups)):
+            groups[i, rows] = 1
+        blocks = torch.zeros(self.width, nb, dtype=torch.float64)
+        for j, c in enumerate(torch.tensor_split(torch.arange(self.width), nb)):
+            blocks[c, j] = 1
+        if self.panoramic:
+            # (X, K*B): view column c' lands in block j of offset k
+            shifted = blocks[(cols[None, :] + offs[:, None]) % x_size]  # (K, X, B)
+        else:
+            # (X, K*B): template column c lies in block j of offset k's window
+            shifted = torch.zeros(self.n_offsets, x_size, nb, dtype=torch.float64)
+            for k, o in enumerate(offs.tolist()):
+                shifted[k, o : o + self.width] = blocks
+        self._mats = {
+            "groups": groups.to(device),
+            "blocks": blocks.to(device),
+            "shifted": shifted.permute(1, 0, 2).reshape(x_size, -1).to(device),
+        }
+        self._mat_cache: dict[tuple[str, torch.dtype], torch.Tensor] = {}
 
     def make_bank(self, *, dtype: torch.dtype, device: torch.device | str | None) -> TemplateBank:
-        """An empty bank with the summaries this matcher needs."""
+        """An empty bank with the summaries this matcher's bounds need."""
+        g, nb, x = self.groups, self.blocks, self.x_size
+        if self.panoramic:
+            shapes = {"gsort": (g * x,), "pool": (g * nb,)}
+        else:
+            shapes = {"pool": (self.n_offsets * g * nb,)}
         return TemplateBank(
-            self.y_size, self.x_size, panoramic=self.panoramic, dtype=dtype, device=device
+            self.y_size,
+            x,
+            summaries=self.summarise,
+            summary_shapes=shapes,
+            dtype=dtype,
+            device=device,
         )
+
+    def summarise(self, t: torch.Tensor) -> dict[str, torch.Tensor]:
+        """Per-template summaries for the bounds.
+
+        Panoramic: the column sums of ``G`` row groups sorted along the columns
+        (``gsort``) and summed over ``B`` blocks of columns (``pool``). Normal mode: the
+        compared window of every offset, pooled the same way (``pool``, ``(K, G, B)``).
+
+        Shape:
+            t: ``(M, Y, X)``.
+        """
+        m, g, nb = t.shape[0], self.groups, self.blocks
+        gsum = self._mat("groups", t.dtype) @ t  # (M, G, X)
+        if self.panoramic:
+            return {
+                "gsort": gsum.sort(-1).values.reshape(m, -1),
+                "pool": (gsum @ self._mat("blocks", t.dtype)).reshape(m, -1),
+            }
+        pool = (gsum @ self._mat("shifted", t.dtype)).view(m, g, self.n_offsets, nb)
+        return {"pool": pool.permute(0, 2, 1, 3).reshape(m, -1)}  # (M, K, G, B)
+
+    def _mat(self, name: str, dtype: torch.dtype) -> torch.Tensor:
+        key = (name, dtype)
+        if key not in self._mat_cache:
+            self._mat_cache[key] = self._mats[name].to(dtype)
+        return self._mat_cache[key]
 
     # ----------------------------------------------------------------- view side
 
     def _view_parts(self, view: torch.Tensor) -> dict[str, torch.Tensor]:
         """Per-frame view summaries used by the bounds and the exact kernel."""
-        g = self.groups
+        g, nb, kk = self.groups, self.blocks, self.n_offsets
+        groups = self._mat("groups", view.dtype)
         if self.panoramic:
-            gsum = _group_sums(view, g)  # (G, X)
+            gsum = groups @ view  # (G, X)
+            pool = (gsum @ self._mat("shifted", view.dtype)).view(g, kk, nb)
             return {
-                "rolled": view[:, self._roll].permute(1, 0, 2).reshape(self.n_offsets, -1),
-                "gsort": gsum.sort(-1).values,
-                "g_rolled": gsum[:, self._roll].permute(1, 0, 2).reshape(self.n_offsets, -1),
+                "rolled": view.reshape(-1).index_select(0, self._roll_flat).view(kk, -1),
+                "gsort": gsum.sort(-1).values.reshape(-1),
+                "pool": pool.permute(1, 0, 2).reshape(kk, -1),  # (K, G*B)
             }
         block = view[:, self.shift : self.shift + self.width].contiguous()
-        gblock = _group_sums(block, g)  # (G, W)
-        return {"block": block, "gblock": gblock, "gtotal": gblock.sum(-1)}
+        return {"block": block, "pool": groups @ block @ self._mat("blocks", view.dtype)}
 
     # -------------------------------------------------------------- exact errors
 
@@ -515,43 +566,36 @@ class TemplateMatcher:
         n = len(bank)
         out = torch.empty(n, dtype=bank.dtype, device=bank._data.device)
         gsort = bank._gsort.view(bank.capacity, -1)
-        vs = parts["gsort"].reshape(-1)
+        vs = parts["gsort"]
         per = max(1, CHUNK_ELEMENTS // vs.numel())
         for s in range(0, n, per):
             e = min(s + per, n)
             out[s:e] = (gsort[s:e] - vs).abs_().sum(1)
         return out
 
-    def window_bound(self, bank: TemplateBank, parts: dict) -> torch.Tensor:
-        """Normal mode: group-total bound of every template and offset, ``(N, K)``."""
-        gcum = bank._gcum[: len(bank)]  # (N, G, X+1)
-        lo = self.offsets
-        win = gcum.index_select(2, lo + self.width) - gcum.index_select(2, lo)  # (N, G, K)
-        return (win - parts["gtotal"][None, :, None]).abs_().sum(1)
+    def coarse_bound(self, bank: TemplateBank, parts: dict, ids: torch.Tensor) -> torch.Tensor:
+        """Block-pooled group-profile bound of the templates ``ids`` at every offset.
 
-    def profile_bound(
-        self, bank: TemplateBank, parts: dict, t: torch.Tensor, k: torch.Tensor
-    ) -> torch.Tensor:
-        """Group column-profile bound of (template, offset index) pairs, ``(P,)``."""
-        out = torch.empty(t.numel(), dtype=bank.dtype, device=t.device)
-        if t.numel() == 0:
+        Returns:
+            Shape ``(M, K)``, in SAD units.
+
+        Shape:
+            ids: ``(M,)``.
+        """
+        kk = self.n_offsets
+        out = torch.empty(ids.numel(), kk, dtype=bank.dtype, device=ids.device)
+        pool = parts["pool"]
+        if self.panoramic:  # template pooled once, view pooled at every offset
+            per = max(1, CHUNK_ELEMENTS // pool.numel())
+            for s in range(0, ids.numel(), per):
+                rows = bank._pool.index_select(0, ids[s : s + per])
+                out[s : s + per] = (rows[:, None, :] - pool[None]).abs_().sum(-1)
             return out
-        per = max(1, CHUNK_ELEMENTS // (self.groups * self.x_size))
-        if self.panoramic:
-            gs = bank._gsum.view(bank.capacity, -1)
-            gr = parts["g_rolled"]
-            for s in range(0, t.numel(), per):
-                e = s + per
-                rows = gs.index_select(0, t[s:e]) - gr.index_select(0, k[s:e])
-                out[s:e] = rows.abs_().sum(1)
-            return out
-        gblock, w = parts["gblock"], self.width
-        for kk, sel in self._by_offset(k):
-            o = int(self.offsets[kk])
-            for s in range(0, sel.numel(), per):
-                idx = sel[s : s + per]
-                win = bank._gsum.index_select(0, t.index_select(0, idx))[:, :, o : o + w]
-                out[idx] = (win - gblock).abs_().sum(dim=(1, 2))
+        tiled = pool.reshape(-1).repeat(kk)  # templates are pooled at every offset
+        per = max(1, CHUNK_ELEMENTS // tiled.numel())
+        for s in range(0, ids.numel(), per):
+            rows = bank._pool.index_select(0, ids[s : s + per])
+            out[s : s + per] = (rows - tiled).abs_().view(-1, kk, pool.numel()).sum(-1)
         return out
 
     # -------------------------------------------------------------------- search
@@ -613,9 +657,8 @@ class TemplateMatcher:
         def keep(bound: torch.Tensor) -> torch.Tensor:
             nonlocal pruned
             ok = bound <= cut()
-            rest = bound[~ok]
-            if rest.numel():
-                pruned = min(pruned, float(rest.min()))
+            if not bool(ok.all()):
+                pruned = min(pruned, float(bound.masked_fill(ok, math.inf).min()))
             return ok
 
         all_k = torch.arange(kk, device=dev)
@@ -623,22 +666,19 @@ class TemplateMatcher:
             tb = self.template_bound(bank, parts)  # (N,)
             seed = int(torch.argmin(tb))
         else:
-            wb = self.window_bound(bank, parts)  # (N, K)
-            seed = int(torch.argmin(wb)) // kk
+            tb = None
+            cb = self.coarse_bound(bank, parts, torch.arange(n, device=dev))  # (N, K)
+            seed = int(torch.argmin(cb)) // kk
         seeds = torch.tensor(sorted({seed, hint} if 0 <= hint < n else {seed}), device=dev)
         evaluate(seeds.repeat_interleave(kk), all_k.repeat(seeds.numel()))
-        if self.panoramic:
+        if tb is not None:
             ids = keep(tb).nonzero()[:, 0]
-            t, k = ids.repeat_interleave(kk), all_k.repeat(ids.numel())
-            lb = tb.index_select(0, t)
+            cb = torch.maximum(self.coarse_bound(bank, parts, ids), tb[ids][:, None])
         else:
-            pairs = keep(wb).nonzero()
-            t, k = pairs[:, 0], pairs[:, 1]
-            lb = wb[t, k]
-        if t.numel():
-            lb = torch.maximum(lb, self.profile_bound(bank, parts, t, k))
-            ok = keep(lb)
-            lb, t, k = lb[ok], t[ok], k[ok]
+            ids = torch.arange(n, device=dev)
+        pairs = keep(cb).nonzero()
+        t, k = ids[pairs[:, 0]], pairs[:, 1]
+        lb = cb[pairs[:, 0], pairs[:, 1]]
         if t.numel():
             order = torch.argsort(lb, stable=True)
             lb, t, k = lb[order], t[order], k[order]

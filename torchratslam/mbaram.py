@@ -101,7 +101,8 @@ class MBARAMParams(Params):
         "(updated) or as it stands (current)",
         choices=("updated", "current"),
     )
-    var_floor: float = param(1e-6, "lower bound on every variance (numerical safety)", gt=0.0)
+    var_floor: float = param(1e-6, "lower bound on every laser variance (numerical safety)", gt=0.0)
+    var_floor_odometry: float = param(1e-6, "lower bound on every odometry variance", gt=0.0)
     laser_scale: float = param(1.0, "range units per metre fed to the laser channels", gt=0.0)
     laser_max_range: float = param(
         30.0, "ranges are clipped to [0, laser_max_range] metres", gt=0.0
@@ -148,9 +149,13 @@ def _wrap(a: torch.Tensor) -> torch.Tensor:
 class _Channel:
     """Node storage of one channel, with room that doubles as nodes are added."""
 
-    def __init__(self, dim: int, full: bool, angular: Sequence[int], dtype, device) -> None:
+    def __init__(
+        self, dim: int, full: bool, angular: Sequence[int], floor: float, dtype, device
+    ) -> None:
         self.dim = dim
         self.full = full
+        self.floor = floor
+        self.log_floor = math.log(floor)
         self.ang = torch.zeros(dim, dtype=torch.bool, device=device)
         if len(angular):
             self.ang[list(angular)] = True
@@ -160,6 +165,7 @@ class _Channel:
         shape = (0, dim, dim) if full else (0, dim)
         self.cov = torch.empty(shape, dtype=dtype, device=device)
         self.chol = torch.empty(shape if full else (0,), dtype=dtype, device=device)
+        self.logcov = torch.empty((0,) if full else (0, dim), dtype=dtype, device=device)
         self.logdet = torch.empty(0, dtype=dtype, device=device)
 
     def grow(self, capacity: int) -> None:
@@ -171,6 +177,8 @@ class _Channel:
         self.mean, self.cov, self.logdet = bigger(self.mean), bigger(self.cov), bigger(self.logdet)
         if self.full:
             self.chol = bigger(self.chol)
+        else:
+            self.logcov = bigger(self.logcov)
 
     def diff(self, x: torch.Tensor, n: int) -> torch.Tensor:
         d = x - self.mean[:n]
@@ -179,11 +187,9 @@ class _Channel:
         return d
 
     def maha(self, d: torch.Tensor, n: int) -> torch.Tensor:
-        """Squared Mahalanobis distances ``d_j^T Sigma_j^-1 d_j``, shape (n,)."""
-        if self.full:
-            z = torch.linalg.solve_triangular(self.chol[:n], d.unsqueeze(-1), upper=False)
-            return z.squeeze(-1).square().sum(-1)
-        return (d.square() / self.cov[:n]).sum(-1)
+        """Squared Mahalanobis distances ``d_j^T Sigma_j^-1 d_j`` (full covariance), (n,)."""
+        z = torch.linalg.solve_triangular(self.chol[:n], d.unsqueeze(-1), upper=False)
+        return z.squeeze(-1).square().sum(-1)
 
 
 class MBARAM:
@@ -229,7 +235,9 @@ class MBARAM:
             )
         self.weights = weights
         self.names = tuple(weights)
-        self.angular = {k: tuple(v) for k, v in (angular or {"odometry": (2,)}).items()}
+        self.angular = {
+            k: tuple(v) for k, v in (angular if angular is not None else {"odometry": (2,)}).items()
+        }
         self.position_channel = position_channel if position_channel in weights else None
         self.dtype = dtype
         self.device = torch.device(device) if device is not None else torch.device("cpu")
@@ -328,13 +336,15 @@ class MBARAM:
 
     # ------------------------------------------------------------- the model
     def _evaluate(self, x: dict[str, torch.Tensor], names: Sequence[str]):
-        """log M_j (N,), vigilance pass mask (N,), per-channel tentative updates."""
+        """``log M_j`` (N,) and the vigilance pass mask (N,) of every node."""
         n = self._n
         logprior = self.prior[:n].log()
         counts = self.counts[:n]
         a = counts / (counts + 1.0)  # N/(N+1)
         b = 1.0 / (counts + 1.0)  # 1/(N+1)
         wsum = sum(self.weights[k] for k in names)
+        if wsum <= 0:
+            raise ConfigError(f"MBARAM channels {list(names)} all have weight 0; use others")
         log_terms = []
         passed = torch.ones(n, dtype=torch.bool, device=self.device)
         log_smax = {k: math.log(self.params.s_max) for k in names}
@@ -351,16 +361,18 @@ class MBARAM:
             logp = -0.5 * (ch.dim * _LOG_2PI + ch.logdet[:n] + q)  # Eq. 5
             joint = logp + logprior
             logpost = joint - torch.logsumexp(joint, 0)  # Eqs. 1, 4
-            log_terms.append(math.log(self.weights[k] / wsum) + logpost)
+            if self.weights[k] > 0:
+                log_terms.append(math.log(self.weights[k] / wsum) + logpost)
             if self.params.vigilance == "current":
                 logs = ch.logdet[:n]
             elif ch.full:
                 # det(a Sigma + b d'd'^T), d' = a d: matrix determinant lemma (Eq. 10)
                 logs = ch.dim * a.log() + ch.logdet[:n] + torch.log1p(a * b * q)
             else:
-                # Eq. 10 per dimension: a s2 + b (a d)^2 = a s2 (1 + a b d^2 / s2), so
-                # log S' = D log a + log S + sum log1p(a b r)  (Eq. 8)
-                logs = ch.dim * a.log() + ch.logdet[:n] + r.mul_((a * b)[:, None]).log1p_().sum(-1)
+                # Eq. 10 per dimension: a s2 + b (a d)^2 = a s2 (1 + a b d^2 / s2), floored
+                # as learning floors it; log S' = sum of the logs (Eq. 8)
+                logv = r.mul_((a * b)[:, None]).log1p_().add_(ch.logcov[:n]).add_(a.log()[:, None])
+                logs = logv.clamp_min_(ch.log_floor).sum(-1)
             passed &= logs <= log_smax[k]  # Eq. 7
         log_m = torch.logsumexp(torch.stack(log_terms), 0)  # Eq. 3 in log space
         return log_m, passed
@@ -434,13 +446,7 @@ class MBARAM:
         x = self._check(inputs, self.names)
         if not self._ch:
             for k, v in x.items():
-                self._ch[k] = _Channel(
-                    v.numel(),
-                    self.params.covariance == "full",
-                    self.angular.get(k, ()),
-                    self.dtype,
-                    self.device,
-                )
+                self._ch[k] = self._new_channel(k, v.numel())
         res = self._select(x, self.names)
         if res.node < 0:
             node = self._add_node(x)
@@ -451,6 +457,12 @@ class MBARAM:
         self.prev_winner = res.node
         return res
 
+    def _new_channel(self, k: str, dim: int) -> _Channel:
+        p = self.params
+        floor = p.var_floor_odometry if k == "odometry" else p.var_floor
+        full = p.covariance == "full"
+        return _Channel(dim, full, self.angular.get(k, ()), floor, self.dtype, self.device)
+
     def _add_node(self, x: dict[str, torch.Tensor]) -> int:
         j = self._n
         if j >= self._cap:
@@ -458,10 +470,16 @@ class MBARAM:
             for ch in self._ch.values():
                 ch.grow(self._cap)
             self.counts = torch.cat(
-                [self.counts, torch.zeros(self._cap - len(self.counts), dtype=self.dtype)]
+                [
+                    self.counts,
+                    torch.zeros(self._cap - len(self.counts), dtype=self.dtype, device=self.device),
+                ]
             )
             self.prior = torch.cat(
-                [self.prior, torch.ones(self._cap - len(self.prior), dtype=self.dtype)]
+                [
+                    self.prior,
+                    torch.ones(self._cap - len(self.prior), dtype=self.dtype, device=self.device),
+                ]
             )
         s2 = self.params.sigma_init_sq
         for k, ch in self._ch.items():
@@ -472,6 +490,7 @@ class MBARAM:
                 ch.chol[j] = math.sqrt(s2) * torch.eye(ch.dim, dtype=self.dtype, device=self.device)
             else:
                 ch.cov[j] = s2
+                ch.logcov[j] = math.log(s2)
             ch.logdet[j] = ch.dim * math.log(s2)
         self.counts[j] = 1.0  # the paper's N=0 followed by one Eq. 12 increment
         self.prior[j] = self.params.p_init
@@ -483,8 +502,8 @@ class MBARAM:
     def _update(self, j: int, x: dict[str, torch.Tensor]) -> None:
         n_j = float(self.counts[j])
         a, b = n_j / (n_j + 1.0), 1.0 / (n_j + 1.0)
-        floor = self.params.var_floor
         for k, ch in self._ch.items():
+            floor = ch.floor
             d = x[k] - ch.mean[j]
             if ch.has_ang:
                 d = torch.where(ch.ang, _wrap(d), d)
@@ -502,7 +521,8 @@ class MBARAM:
             else:
                 var = (a * ch.cov[j] + b * dn.square()).clamp_min(floor)  # Eq. 10 (x I)
                 ch.cov[j] = var
-                ch.logdet[j] = var.log().sum()
+                ch.logcov[j] = var.log()
+                ch.logdet[j] = ch.logcov[j].sum()
             ch.mean[j] = mu
         total = float(self.counts[: self._n].sum())
         self.prior[j] = n_j / total  # Eq. 11 (N_J before the increment)
@@ -584,13 +604,14 @@ class MBARAM:
             cov = torch.as_tensor(np.asarray(state[f"cov/{k}"]), dtype=self.dtype)
             if mean.shape[0] != n or cov.shape[0] != n or (cov.dim() == 3) != full:
                 raise MapFormatError(f"MBARAM state channel {k!r} is inconsistent with its counts")
-            ch = _Channel(mean.shape[1], full, self.angular.get(k, ()), self.dtype, self.device)
+            ch = self._new_channel(k, mean.shape[1])
             ch.mean, ch.cov = mean.to(self.device), cov.to(self.device)
             if full:
                 ch.chol = torch.linalg.cholesky(ch.cov)
                 ch.logdet = 2.0 * ch.chol.diagonal(dim1=-2, dim2=-1).log().sum(-1)
             else:
-                ch.logdet = ch.cov.log().sum(-1)
+                ch.logcov = ch.cov.log()
+                ch.logdet = ch.logcov.sum(-1)
             self._ch[k] = ch
         self._n = self._cap = n
         self.counts = torch.as_tensor(counts, dtype=self.dtype, device=self.device)

@@ -197,8 +197,10 @@ def merge_maps(
         raise GraphError(f"partial template {z} does not exist (the partial map has {n_vp})")
     e_u = pick_experience(loaded, u) if loaded_exp is None else int(loaded_exp)
     if not 0 <= e_u < n_el:
-        raise GraphError(f"loaded template {u} has no experience to merge at; match another "
-                         "template or let the stored map create one")
+        raise GraphError(
+            f"loaded template {u} has no experience to merge at; match another "
+            "template or let the stored map create one"
+        )
     if partial_exp is None:
         e_z = pick_experience(partial, z)
         if e_z < 0:

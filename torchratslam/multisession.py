@@ -33,7 +33,12 @@ import torch
 from torchratslam.config import RatSLAMConfig
 from torchratslam.merge import merge_maps, pick_experience
 from torchratslam.pipeline import RatSLAM, RunResult, StepResult
-from torchratslam.state import MapState, apply_state, check_compatible, state_from_slam
+from torchratslam.state import (
+    MapState,
+    apply_state,
+    conform,
+    state_from_slam,
+)
 
 __all__ = ["MultiSessionRatSLAM"]
 
@@ -66,7 +71,7 @@ class MultiSessionRatSLAM:
             ``time_s``.
         snapshots: per merge: ``loaded`` and ``partial`` experience poses (N, 3) before
             the merge, ``merged`` after it (before relaxation), ``relaxed`` after the
-            relaxation, ``n_loaded``, and ``merged_state`` (the merged MapState).
+            relaxation, ``n_loaded``, ``partial_state`` and ``merged_state`` (MapStates).
         pending: indices of the stored maps not merged yet.
     """
 
@@ -82,10 +87,15 @@ class MultiSessionRatSLAM:
         **ratslam_kwargs: Any,
     ) -> None:
         self.slam = RatSLAM(config, **ratslam_kwargs)
-        self.stored = list(stored)
-        for i, s in enumerate(self.stored):
-            check_compatible(s, config, what=f"stored map {i}")
-        self.names = list(names) if names is not None else [f"map{i}" for i in range(len(stored))]
+        self.stored = [
+            conform(s, config, what=f"stored map {i} ({s.name or 'in memory'})")
+            for i, s in enumerate(stored)
+        ]
+        self.names = (
+            list(names)
+            if names is not None
+            else [s.name or f"map{i}" for i, s in enumerate(self.stored)]
+        )
         self.shift_pose_cells = bool(shift_pose_cells)
         self.session = session
         self.keep_snapshots = keep_snapshots
@@ -136,7 +146,11 @@ class MultiSessionRatSLAM:
                 callback(r)
 
         return self.slam.run(
-            frames, max_frames=max_frames, progress=progress, pipelined=False, callback=after,
+            frames,
+            max_frames=max_frames,
+            progress=progress,
+            pipelined=False,
+            callback=after,
             **kwargs,
         )
 
@@ -171,12 +185,19 @@ class MultiSessionRatSLAM:
         self.merge_with(k, tid, offset=offset, error=err, frame=result.frame)
         n_t, n_e, _ = self.slam.counts()
         return dataclasses.replace(
-            result, experience_id=int(self.slam.experience_map.current_id), templates=n_t,
+            result,
+            experience_id=int(self.slam.experience_map.current_id),
+            templates=n_t,
             experiences=n_e,
         )
 
     def merge_with(
-        self, k: int, loaded_template: int, *, offset: int = 0, error: float = 0.0,
+        self,
+        k: int,
+        loaded_template: int,
+        *,
+        offset: int = 0,
+        error: float = 0.0,
         frame: int | None = None,
     ) -> dict[str, Any]:
         """Merge stored map ``k`` (matched at ``loaded_template``) into the running map
@@ -189,20 +210,28 @@ class MultiSessionRatSLAM:
         partial = state_from_slam(self.slam)
         loaded = self.stored[k]
         rel = float(self._banks[k].relative_rad(offset))
-        res = merge_maps(loaded, partial, loaded_template, relative_rad=rel,
-                         shift_pose_cells=self.shift_pose_cells)
+        res = merge_maps(
+            loaded,
+            partial,
+            loaded_template,
+            relative_rad=rel,
+            shift_pose_cells=self.shift_pose_cells,
+        )
         apply_state(res.state, self.slam, exp_ids=res.info["exp_ids"])
         self.slam.experience_map.iterate()
         self.pending.remove(k)
         if self.keep_snapshots:
-            self.snapshots.append({
-                "loaded": loaded.exp_pose.copy(),
-                "partial": partial.exp_pose.copy(),
-                "merged": res.state.exp_pose.copy(),
-                "relaxed": np.asarray(self.slam.experience_map.poses, np.float64).copy(),
-                "n_loaded": np.array(loaded.n_experiences),
-                "merged_state": res.state,
-            })
+            self.snapshots.append(
+                {
+                    "loaded": loaded.exp_pose.copy(),
+                    "partial": partial.exp_pose.copy(),
+                    "merged": res.state.exp_pose.copy(),
+                    "relaxed": np.asarray(self.slam.experience_map.poses, np.float64).copy(),
+                    "n_loaded": np.array(loaded.n_experiences),
+                    "merged_state": res.state,
+                    "partial_state": partial,
+                }
+            )
         rec = {
             "frame": int(self.slam.frame_index - 1 if frame is None else frame),
             "map": int(k),
@@ -316,8 +345,14 @@ def run_sessions(
     t0 = time.perf_counter()
     for i, s in enumerate(sessions):
         name = getattr(s, "name", f"session{i + 1}")
-        ms = MultiSessionRatSLAM(config, stored, names=names, session=name,
-                                 shift_pose_cells=shift_pose_cells, **ratslam_kwargs)
+        ms = MultiSessionRatSLAM(
+            config,
+            stored,
+            names=names,
+            session=name,
+            shift_pose_cells=shift_pose_cells,
+            **ratslam_kwargs,
+        )
         frames = s.frames() if hasattr(s, "frames") else s
         if offsets is not None:
             frames = _shifted(frames, offsets[i])
@@ -331,13 +366,19 @@ def run_sessions(
         merges += ms.merges
         snapshots += ms.snapshots
         session_maps.append(state)
-        per_session.append({"name": name, "frames": res.frames, **state.summary(),
-                            "merges": len(ms.merges)})
+        per_session.append(
+            {"name": name, "frames": res.frames, **state.summary(), "merges": len(ms.merges)}
+        )
         names = [names[k] for k in ms.pending] + [name]
-        stored = ms.unmerged() + [state]
+        stored = [*ms.unmerged(), state]
     return {
-        "maps": stored, "names": names, "merges": merges, "snapshots": snapshots,
-        "session_maps": session_maps, "sessions": per_session, "relax_s": relax_s,
+        "maps": stored,
+        "names": names,
+        "merges": merges,
+        "snapshots": snapshots,
+        "session_maps": session_maps,
+        "sessions": per_session,
+        "relax_s": relax_s,
         "wall_s": time.perf_counter() - t0,
     }
 
@@ -381,17 +422,36 @@ def run_tour(
     gt = full.groundtruth()
     starts = np.cumsum([0] + [len(s) for s in tour.sessions])[:-1]
     offsets = [float(full.times[a] - s.times[0]) for a, s in zip(starts, tour.sessions)]
-    sub = (lambda n: None if save_dir is None else Path(save_dir) / n)
+
+    def sub(name: str) -> Path | None:
+        return None if save_dir is None else Path(save_dir) / name
 
     t0 = time.perf_counter()
     single = RatSLAM(config, **ratslam_kwargs)
-    single.run(full.frames(), max_frames=None if max_frames is None else
-               max_frames * len(tour.sessions), progress=progress)
+    single.run(
+        full.frames(),
+        max_frames=None if max_frames is None else max_frames * len(tour.sessions),
+        progress=progress,
+    )
     single_state = state_from_slam(single)
     single_wall = time.perf_counter() - t0
+    # the last session alone, continuous (no kidnap): for the virtual tour this is the
+    # paper's single-session run (session 2 contains session 1's path)
+    last = RatSLAM(config, **ratslam_kwargs)
+    last.run(
+        _shifted(tour.sessions[-1].frames(), offsets[-1]), max_frames=max_frames, progress=progress
+    )
+    last_state = state_from_slam(last)
 
-    multi = run_sessions(config, tour.sessions, offsets=offsets, save_dir=sub("multi"),
-                         progress=progress, max_frames=max_frames, **ratslam_kwargs)
+    multi = run_sessions(
+        config,
+        tour.sessions,
+        offsets=offsets,
+        save_dir=sub("multi"),
+        progress=progress,
+        max_frames=max_frames,
+        **ratslam_kwargs,
+    )
     final = multi["maps"][-1]
     s_xy, m_xy = single_state.exp_pose[:, :2], final.exp_pose[:, :2]
     ic = icp(m_xy, s_xy) if len(s_xy) and len(m_xy) else None
@@ -403,8 +463,10 @@ def run_tour(
         out.update(
             maps=len(run["maps"]),
             connected=len(run["maps"]) == 1,
-            merges=[{"session": m["session"], "frame": m["frame"], "map": m["map_name"]}
-                    for m in run["merges"]],
+            merges=[
+                {"session": m["session"], "frame": m["frame"], "map": m["map_name"]}
+                for m in run["merges"]
+            ],
             sessions=run["sessions"],
             graph_error=_graph_error(fin, config),
             relax_s=run["relax_s"],
@@ -416,27 +478,62 @@ def run_tour(
         "tour": getattr(tour, "name", "tour"),
         "frames": len(full),
         "sessions": [s.name for s in tour.sessions],
-        "single": {**_map_metrics(single_state, gt), "graph_error": _graph_error(
-            single_state, config), "wall_s": single_wall},
+        "single": {
+            **_map_metrics(single_state, gt),
+            "graph_error": _graph_error(single_state, config),
+            "wall_s": single_wall,
+        },
         "multi": block(multi),
         "icp_rmse": None if ic is None else float(ic.rmse),
         "icp_rmse_relative": None if ic is None else float(ic.rmse / max(extent, 1e-12)),
         "tour_extent_m": extent,
+        "single_last_session": _map_metrics(last_state, gt),
+        "icp_rmse_last_session": (
+            float(icp(m_xy, last_state.exp_pose[:, :2]).rmse)
+            if last_state.n_experiences and len(m_xy)
+            else None
+        ),
         "paper_icp_rmse": PAPER_ICP_RMSE.get(getattr(tour, "name", ""), None),
-        "merges": [{"session": m["session"], "frame": m["frame"], "map": m["map_name"],
-                    "error": m["error"], "scenario": m["scenario"],
-                    "experiences_added": m["experiences_added"]} for m in multi["merges"]],
+        "merges": [
+            {
+                "session": m["session"],
+                "frame": m["frame"],
+                "map": m["map_name"],
+                "error": m["error"],
+                "scenario": m["scenario"],
+                "experiences_added": m["experiences_added"],
+            }
+            for m in multi["merges"]
+        ],
     }
     n_s = report["single"]["experiences"]
     report["experiences_difference_relative"] = (
         (report["multi"]["experiences"] - n_s) / n_s if n_s else None
     )
-    data: dict[str, Any] = {"single": single_state, "multi": multi, "groundtruth": gt,
-                            "offsets": offsets, "icp": ic,
-                            "session_starts": [float(full.times[a]) for a in starts], "world": getattr(tour, "world", None)}
+    n_l = report["single_last_session"]["experiences"]
+    report["experiences_difference_relative_last_session"] = (
+        (report["multi"]["experiences"] - n_l) / n_l if n_l else None
+    )
+    data: dict[str, Any] = {
+        "single": single_state,
+        "single_last_session": last_state,
+        "multi": multi,
+        "groundtruth": gt,
+        "offsets": offsets,
+        "icp": ic,
+        "session_starts": [float(full.times[a]) for a in starts],
+        "world": getattr(tour, "world", None),
+    }
     if ablation:
-        abl = run_sessions(config, tour.sessions, offsets=offsets, shift_pose_cells=False,
-                           progress=progress, max_frames=max_frames, **ratslam_kwargs)
+        abl = run_sessions(
+            config,
+            tour.sessions,
+            offsets=offsets,
+            shift_pose_cells=False,
+            progress=progress,
+            max_frames=max_frames,
+            **ratslam_kwargs,
+        )
         report["ablation_no_pc_shift"] = block(abl)
         data["ablation"] = abl
     if backends:
@@ -449,12 +546,22 @@ def run_tour(
                 run = multi
             else:
                 cfg = config.replace(exp_backend=name)
-                run = run_sessions(cfg, tour.sessions, offsets=offsets, progress=progress,
-                                   max_frames=max_frames, **ratslam_kwargs)
+                run = run_sessions(
+                    cfg,
+                    tour.sessions,
+                    offsets=offsets,
+                    progress=progress,
+                    max_frames=max_frames,
+                    **ratslam_kwargs,
+                )
             b = block(run)
-            table[name] = {"error": b["graph_error"], "ate_rmse_m": b["ate_rmse_m"],
-                           "time_s": run["relax_s"], "experiences": b["experiences"],
-                           "connected": b["connected"]}
+            table[name] = {
+                "error": b["graph_error"],
+                "ate_rmse_m": b["ate_rmse_m"],
+                "time_s": run["relax_s"],
+                "experiences": b["experiences"],
+                "connected": b["connected"],
+            }
         report["backends"] = table
         after = []
         for m, snap in zip(multi["merges"], multi["snapshots"]):
@@ -463,20 +570,38 @@ def run_tour(
             if pg.num_edges == 0:
                 continue
             truth = interpolate_groundtruth(gt, st.exp_t)
-            rows = compare_backends(pg, list(backends), truth,
-                                    passes=config.experience_map.exp_loops,
-                                    correction=config.experience_map.exp_correction)
-            after.append({"session": m["session"], "frame": m["frame"], "results": {
-                r["name"]: {k: r[k] for k in ("error", "initial_error", "ate_rmse_m", "time_s")}
-                for r in rows}})
+            rows = compare_backends(
+                pg,
+                list(backends),
+                truth,
+                passes=config.experience_map.exp_loops,
+                correction=config.experience_map.exp_correction,
+            )
+            after.append(
+                {
+                    "session": m["session"],
+                    "frame": m["frame"],
+                    "results": {
+                        r["name"]: {
+                            k: r[k] for k in ("error", "initial_error", "ate_rmse_m", "time_s")
+                        }
+                        for r in rows
+                    },
+                }
+            )
         report["backends_after_merge"] = after
         pg = _posegraph(final, config)
         if pg.num_edges:
             truth = interpolate_groundtruth(gt, final.exp_t)
-            rows = compare_backends(pg, list(backends), truth,
-                                    passes=config.experience_map.exp_loops,
-                                    correction=config.experience_map.exp_correction)
+            rows = compare_backends(
+                pg,
+                list(backends),
+                truth,
+                passes=config.experience_map.exp_loops,
+                correction=config.experience_map.exp_correction,
+            )
             report["backends_final_map"] = {
                 r["name"]: {k: r[k] for k in ("error", "initial_error", "ate_rmse_m", "time_s")}
-                for r in rows}
+                for r in rows
+            }
     return {"report": report, "data": data}

@@ -175,7 +175,8 @@ class PoseCellNetwork(nn.Module):
         method: ``"auto"`` (default), ``"crop"``, ``"separable"`` or ``"conv3d"``
             (module docstring).
         crop_fraction: ``"crop"`` falls back to the whole network (separable) in a step
-            whose box holds more than this fraction of the cells.
+            whose box holds more than this fraction of the cells; default 0.5 for
+            ``B == 1`` (where per-operation overhead dominates) and 0.8 for batches.
 
     Attributes:
         activity: buffer ``(B, TH, Y, X)``, non-negative, each network summing to 1.
@@ -198,7 +199,7 @@ class PoseCellNetwork(nn.Module):
         dtype: torch.dtype = torch.float32,
         device: Any = None,
         method: str = "auto",
-        crop_fraction: float = 0.5,
+        crop_fraction: float | None = None,
     ) -> None:
         super().__init__()
         if not isinstance(params, PoseCellParams):
@@ -212,6 +213,8 @@ class PoseCellNetwork(nn.Module):
         self.params = params
         self.batch_size = int(batch_size)
         self.requested_method = method
+        if crop_fraction is None:  # one network is overhead-bound, a batch compute-bound
+            crop_fraction = 0.5 if int(batch_size) == 1 else 0.8
         self.crop_fraction = float(crop_fraction)
         xy, th = params.pc_dim_xy, params.pc_dim_th
         self.dims = (xy, xy, th)

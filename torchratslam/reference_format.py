@@ -56,16 +56,19 @@ class _Lines:
         try:
             text = path.read_text()
         except FileNotFoundError:
-            raise MapFormatError(f"{path} is missing: a reference-format map needs all of "
-                                 f"{', '.join(FILES)}") from None
+            raise MapFormatError(
+                f"{path} is missing: a reference-format map needs all of {', '.join(FILES)}"
+            ) from None
         except UnicodeDecodeError:
             raise MapFormatError(f"{path} is not a text file") from None
         self.lines = [ln.strip() for ln in text.splitlines() if ln.strip()]
         self.i = 0
 
     def error(self, what: str) -> MapFormatError:
-        return MapFormatError(f"{self.path}, line {self.i + 1}: {what}; the file is corrupt or "
-                              "truncated (re-export it from the reference implementation)")
+        return MapFormatError(
+            f"{self.path}, line {self.i + 1}: {what}; the file is corrupt or "
+            "truncated (re-export it from the reference implementation)"
+        )
 
     def at_end(self) -> bool:
         return self.i >= len(self.lines) or self.lines[self.i] == "-"
@@ -156,9 +159,11 @@ def read_reference(directory: str | Path, config: Any = None) -> MapState:
     if config is None:
         ty, tx = 1, size
     if ty * tx != size:
-        raise MapFormatError(f"{d / FILES[0]}: templates have {size} values but the config's "
-                             f"template_x_size x template_y_size = {tx} x {ty} = {tx * ty}; use "
-                             "the config the map was made with")
+        raise MapFormatError(
+            f"{d / FILES[0]}: templates have {size} values but the config's "
+            f"template_x_size x template_y_size = {tx} x {ty} = {tx * ty}; use "
+            "the config the map was made with"
+        )
     tpl, means = [], []
     while not lv.at_end():
         tid = lv.integer()
@@ -183,8 +188,7 @@ def read_reference(directory: str | Path, config: Any = None) -> MapState:
         pt.int_list()  # experience ids of the template: derived from the experiences
     pt.tail()
     if len(t_pc) != n:
-        raise MapFormatError(f"{d / FILES[1]} lists {len(t_pc)} templates but {FILES[0]} "
-                             f"holds {n}")
+        raise MapFormatError(f"{d / FILES[1]} lists {len(t_pc)} templates but {FILES[0]} holds {n}")
     # --- experience -> pose cells
     pe = _Lines(d / FILES[2])
     e_pc, e_vt = [], []
@@ -213,8 +217,9 @@ def read_reference(directory: str | Path, config: Any = None) -> MapState:
     prev_exp = p2 if p2 >= 0 else prev_exp
     m = len(poses)
     if len(e_pc) != m:
-        raise MapFormatError(f"{d / FILES[2]} lists {len(e_pc)} experiences but {FILES[3]} "
-                             f"holds {m}")
+        raise MapFormatError(
+            f"{d / FILES[2]} lists {len(e_pc)} experiences but {FILES[3]} holds {m}"
+        )
     # --- links
     lk = _Lines(d / FILES[4])
     rows = []
@@ -275,8 +280,10 @@ def write_reference(state: MapState, directory: str | Path) -> Path:
     if target.exists():
         other = {p.name for p in target.iterdir()} - set(FILES)
         if other:
-            raise InputError(f"{target} holds files other than a reference map "
-                             f"({', '.join(sorted(other)[:3])}); choose an empty directory")
+            raise InputError(
+                f"{target} holds files other than a reference map "
+                f"({', '.join(sorted(other)[:3])}); choose an empty directory"
+            )
     target.parent.mkdir(parents=True, exist_ok=True)
     n, m = state.n_templates, state.n_experiences
     tail_vt = ["-", str(state.current_vt), str(state.prev_vt)]
@@ -291,8 +298,14 @@ def write_reference(state: MapState, directory: str | Path) -> Path:
     pt = []
     for i in range(n):
         x, y, th = state.template_pc[i]
-        pt += [str(i), _num(x), _num(y), _num(th), _num(state.template_decay[i]),
-               _ids(order[bounds[i]:bounds[i + 1]])]
+        pt += [
+            str(i),
+            _num(x),
+            _num(y),
+            _num(th),
+            _num(state.template_decay[i]),
+            _ids(order[bounds[i] : bounds[i + 1]]),
+        ]
     pe = []
     for j in range(m):
         x, y, th = state.exp_pc[j]
@@ -304,14 +317,28 @@ def write_reference(state: MapState, directory: str | Path) -> Path:
     ex = []
     for j in range(m):
         x, y, th = state.exp_pose[j]
-        ex += [str(j), _num(x), _num(y), _num(th), str(int(state.exp_template[j])),
-               _ids(l_order[l_bounds[j]:l_bounds[j + 1]]),
-               _ids(t_order[t_bounds[j]:t_bounds[j + 1]]), "0.0", "0.0", "0.0"]
+        ex += [
+            str(j),
+            _num(x),
+            _num(y),
+            _num(th),
+            str(int(state.exp_template[j])),
+            _ids(l_order[l_bounds[j] : l_bounds[j + 1]]),
+            _ids(t_order[t_bounds[j] : t_bounds[j + 1]]),
+            "0.0",
+            "0.0",
+            "0.0",
+        ]
     lk = []
     for k in range(state.n_links):
-        lk += [_num(state.link_d[k]), _num(state.link_heading[k]), _num(state.link_facing[k]),
-               str(int(state.link_to[k])), str(int(state.link_from[k])),
-               _num(state.link_dt[k])]
+        lk += [
+            _num(state.link_d[k]),
+            _num(state.link_heading[k]),
+            _num(state.link_facing[k]),
+            str(int(state.link_to[k])),
+            str(int(state.link_from[k])),
+            _num(state.link_dt[k]),
+        ]
     contents = {
         FILES[0]: lv + tail_vt,
         FILES[1]: pt + tail_vt,

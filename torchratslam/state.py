@@ -125,6 +125,7 @@ class MapState:
         frame_index: frames processed so far in the session that made the map.
         extra: module-specific arrays (see the module docstring).
         scalars: module-specific Python scalars (int, float, bool, str).
+        name: where the map was loaded from (reports only; not saved, not compared).
     """
 
     config: dict[str, Any]
@@ -152,6 +153,7 @@ class MapState:
     frame_index: int = 0
     extra: dict[str, np.ndarray] = field(default_factory=dict)
     scalars: dict[str, Any] = field(default_factory=dict)
+    name: str = field(default="", compare=False)
 
     # ------------------------------------------------------------------ sizes
     @property
@@ -258,8 +260,10 @@ class MapState:
         """
 
         def bad(msg: str) -> MapFormatError:
-            return MapFormatError(f"{source}: {msg}; the map is corrupt or was not written by "
-                                  "torchratslam (re-save it, or re-run the session)")
+            return MapFormatError(
+                f"{source}: {msg}; the map is corrupt or was not written by "
+                "torchratslam (re-save it, or re-run the session)"
+            )
 
         for name, (kind, ndim) in ARRAY_FIELDS.items():
             a = getattr(self, name)
@@ -275,15 +279,27 @@ class MapState:
                 raise bad(f"array {name!r} holds NaN or infinite values")
         n, m, el = self.n_templates, self.n_experiences, self.n_links
         expect = {
-            "template_mean": (n,), "template_frame": (n,), "template_pc": (n, 3),
-            "template_decay": (n,), "exp_pc": (m, 3), "exp_template": (m,),
-            "exp_frame": (m,), "exp_t": (m,), "exp_pose": (m, 3), "link_to": (el,),
-            "link_d": (el,), "link_heading": (el,), "link_facing": (el,), "link_dt": (el,),
+            "template_mean": (n,),
+            "template_frame": (n,),
+            "template_pc": (n, 3),
+            "template_decay": (n,),
+            "exp_pc": (m, 3),
+            "exp_template": (m,),
+            "exp_frame": (m,),
+            "exp_t": (m,),
+            "exp_pose": (m, 3),
+            "link_to": (el,),
+            "link_d": (el,),
+            "link_heading": (el,),
+            "link_facing": (el,),
+            "link_dt": (el,),
         }
         for name, shape in expect.items():
             if getattr(self, name).shape != shape:
-                raise bad(f"array {name!r} has shape {getattr(self, name).shape}, expected "
-                          f"{shape} (N={n} templates, M={m} experiences, L={el} links)")
+                raise bad(
+                    f"array {name!r} has shape {getattr(self, name).shape}, expected "
+                    f"{shape} (N={n} templates, M={m} experiences, L={el} links)"
+                )
         for key, value in self.extra.items():
             if not isinstance(key, str) or not _KEY_RE.match(key):
                 raise bad(f"extra key {key!r} has characters outside [A-Za-z0-9_.:-]")
@@ -294,8 +310,10 @@ class MapState:
             if prefix in PER_ENTITY:
                 size = getattr(self, PER_ENTITY[prefix]).shape[0]
                 if value.ndim == 0 or value.shape[0] != size:
-                    raise bad(f"per-{prefix} extra {key!r} has shape {value.shape}, expected "
-                              f"a first axis of {size}")
+                    raise bad(
+                        f"per-{prefix} extra {key!r} has shape {value.shape}, expected "
+                        f"a first axis of {size}"
+                    )
         for key, value in self.scalars.items():
             if not isinstance(value, (bool, int, float, str)) or isinstance(value, np.generic):
                 raise bad(f"scalar {key!r} = {value!r} is not a Python int/float/bool/str")
@@ -303,13 +321,17 @@ class MapState:
                 raise bad(f"scalar {key!r} is {value}")
         pcs = self.pc_dims
         if self.activity.size and self.activity.shape != (pcs[2], pcs[1], pcs[0]):
-            raise bad(f"pose-cell activity has shape {self.activity.shape}, but the map's config "
-                      f"says (pc_dim_th, pc_dim_xy, pc_dim_xy) = {(pcs[2], pcs[1], pcs[0])}")
+            raise bad(
+                f"pose-cell activity has shape {self.activity.shape}, but the map's config "
+                f"says (pc_dim_th, pc_dim_xy, pc_dim_xy) = {(pcs[2], pcs[1], pcs[0])}"
+            )
         ty = int(self.config.get("template_y_size", self.templates.shape[1]))
         tx = int(self.config.get("template_x_size", self.templates.shape[2]))
         if self.templates.shape[1:] != (ty, tx):
-            raise bad(f"templates have shape {self.templates.shape[1:]} (Y, X), but the map's "
-                      f"config says template_y_size x template_x_size = {(ty, tx)}")
+            raise bad(
+                f"templates have shape {self.templates.shape[1:]} (Y, X), but the map's "
+                f"config says template_y_size x template_x_size = {(ty, tx)}"
+            )
         if n and ((self.exp_template < -1) | (self.exp_template >= n)).any():
             raise bad(f"an experience refers to a template id outside 0..{n - 1}")
         if not n and m and (self.exp_template != -1).any():
@@ -320,8 +342,7 @@ class MapState:
                 raise bad(f"a link ({name}) refers to an experience id outside 0..{m - 1}")
         if el and (self.link_from == self.link_to).any():
             raise bad("a link joins an experience to itself")
-        for name, size in (("current_vt", n), ("prev_vt", n), ("current_exp", m),
-                           ("prev_exp", m)):
+        for name, size in (("current_vt", n), ("prev_vt", n), ("current_exp", m), ("prev_exp", m)):
             v = getattr(self, name)
             ok_type = isinstance(v, (int, np.integer)) and not isinstance(v, bool)
             if not ok_type or not -1 <= v < max(size, 0):
@@ -437,15 +458,20 @@ def load_map(directory: str | Path) -> MapState:
     try:
         meta = json.loads((d / STATE_JSON).read_text())
     except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise MapFormatError(f"{d / STATE_JSON} is not valid JSON ({exc}); the file is corrupt "
-                             "or truncated") from None
+        raise MapFormatError(
+            f"{d / STATE_JSON} is not valid JSON ({exc}); the file is corrupt or truncated"
+        ) from None
     if not isinstance(meta, dict) or meta.get("format") != FORMAT_NAME:
-        raise MapFormatError(f"{d / STATE_JSON}: not a {FORMAT_NAME} file (format "
-                             f"{meta.get('format') if isinstance(meta, dict) else None!r})")
+        raise MapFormatError(
+            f"{d / STATE_JSON}: not a {FORMAT_NAME} file (format "
+            f"{meta.get('format') if isinstance(meta, dict) else None!r})"
+        )
     version = meta.get("version")
     if version != FORMAT_VERSION:
-        raise MapFormatError(f"{src}: map format version {version!r} is not supported (this "
-                             f"torchratslam reads version {FORMAT_VERSION}); upgrade torchratslam")
+        raise MapFormatError(
+            f"{src}: map format version {version!r} is not supported (this "
+            f"torchratslam reads version {FORMAT_VERSION}); upgrade torchratslam"
+        )
     for key in ("arrays", "config", "ids", "scalars"):
         if not isinstance(meta.get(key), dict):
             raise MapFormatError(f"{d / STATE_JSON}: missing or malformed {key!r} section")
@@ -455,19 +481,25 @@ def load_map(directory: str | Path) -> MapState:
             names = set(npz.files)
             if names != set(declared):
                 missing, extra = set(declared) - names, names - set(declared)
-                raise MapFormatError(f"{src}: state.npz and state.json disagree (missing arrays: "
-                                     f"{sorted(missing)}, undeclared: {sorted(extra)})")
+                raise MapFormatError(
+                    f"{src}: state.npz and state.json disagree (missing arrays: "
+                    f"{sorted(missing)}, undeclared: {sorted(extra)})"
+                )
             arrays = {k: npz[k] for k in names}
     except MapFormatError:
         raise
     except (zipfile.BadZipFile, EOFError, OSError, ValueError, KeyError) as exc:
-        raise MapFormatError(f"{d / STATE_NPZ} cannot be read ({type(exc).__name__}: {exc}); "
-                             "the file is corrupt or truncated") from None
+        raise MapFormatError(
+            f"{d / STATE_NPZ} cannot be read ({type(exc).__name__}: {exc}); "
+            "the file is corrupt or truncated"
+        ) from None
     for k, a in arrays.items():
         spec = declared[k]
         if list(a.shape) != list(spec.get("shape", [])) or str(a.dtype) != spec.get("dtype"):
-            raise MapFormatError(f"{src}: array {k!r} is {a.dtype}{list(a.shape)} but state.json "
-                                 f"declares {spec.get('dtype')}{spec.get('shape')}")
+            raise MapFormatError(
+                f"{src}: array {k!r} is {a.dtype}{list(a.shape)} but state.json "
+                f"declares {spec.get('dtype')}{spec.get('shape')}"
+            )
     missing = [k for k in ARRAY_FIELDS if k not in arrays]
     if missing:
         raise MapFormatError(f"{src}: required arrays missing: {', '.join(missing)}")
@@ -510,8 +542,10 @@ def load_state(path: str | Path, config: Any = None) -> MapState:
     """
     p = Path(path)
     if not p.exists():
-        raise InputError(f"map {str(p)!r} not found: give a saved state directory, a run's OUT "
-                         "directory, or a reference-format map directory")
+        raise InputError(
+            f"map {str(p)!r} not found: give a saved state directory, a run's OUT "
+            "directory, or a reference-format map directory"
+        )
     native = _resolve_native(p) if p.is_dir() else None
     if native is not None:
         state = load_map(native)
@@ -527,6 +561,7 @@ def load_state(path: str | Path, config: Any = None) -> MapState:
             )
     if config is not None:
         check_compatible(state, config, what=f"map {str(p)!r}")
+    state.name = str(p)
     return state
 
 
@@ -564,8 +599,10 @@ def _split_extras(prefix: str, d: dict[str, Any], known: set[str], out: MapState
         else:
             arr = np.asarray(v.detach().cpu().numpy() if hasattr(v, "detach") else v)
             if arr.dtype == object:
-                raise MapFormatError(f"module state {prefix}.{k} holds Python objects; "
-                                     "it cannot be saved without pickle")
+                raise MapFormatError(
+                    f"module state {prefix}.{k} holds Python objects; "
+                    "it cannot be saved without pickle"
+                )
             out.extra[f"{prefix}.{k}"] = arr
 
 
@@ -575,13 +612,13 @@ def _collect(prefix: str, state: MapState) -> dict[str, Any]:
     p = prefix + "."
     for k, v in state.extra.items():
         if k.startswith(p):
-            out[k[len(p):]] = np.array(v, copy=True)
+            out[k[len(p) :]] = np.array(v, copy=True)
     for k, v in state.scalars.items():
         if k.startswith(p):
             if k.endswith(".none"):
-                out[k[len(p):-5]] = None
+                out[k[len(p) : -5]] = None
             else:
-                out[k[len(p):]] = v
+                out[k[len(p) :]] = v
     return out
 
 
@@ -593,32 +630,52 @@ def experience_map_state(state: MapState) -> dict[str, Any]:
     counts = state.extra.get("link:counts", np.zeros((n_l, 3), np.int64))
     behaviour = state.extra.get("link:behaviour", np.zeros(n_l, np.int64))
     em.pop("accum", None)
-    em.update({
-        "poses": state.exp_pose.copy(),
-        "pc": state.exp_pc.copy(),
-        "template_id": state.exp_template.copy(),
-        "frame": state.exp_frame.copy(),
-        "t": state.exp_t.copy(),
-        "link_ends": np.stack([state.link_from, state.link_to], axis=1).reshape(-1, 2),
-        "link_values": np.stack(
-            [state.link_d, state.link_heading, state.link_facing, state.link_dt], axis=1
-        ).reshape(-1, 4),
-        "link_counts": np.array(counts, dtype=np.int64, copy=True),
-        "link_behaviour": np.array(behaviour, dtype=np.int64, copy=True),
-        "current_id": int(state.current_exp),
-        "prev_id": int(state.prev_exp),
-        "accum_x": float(accum[0]),
-        "accum_y": float(accum[1]),
-        "accum_facing": float(accum[2]),
-        "accum_time": float(accum[3]),
-    })
+    em.update(
+        {
+            "poses": state.exp_pose.copy(),
+            "pc": state.exp_pc.copy(),
+            "template_id": state.exp_template.copy(),
+            "frame": state.exp_frame.copy(),
+            "t": state.exp_t.copy(),
+            "link_ends": np.stack([state.link_from, state.link_to], axis=1).reshape(-1, 2),
+            "link_values": np.stack(
+                [state.link_d, state.link_heading, state.link_facing, state.link_dt], axis=1
+            ).reshape(-1, 4),
+            "link_counts": np.array(counts, dtype=np.int64, copy=True),
+            "link_behaviour": np.array(behaviour, dtype=np.int64, copy=True),
+            "current_id": int(state.current_exp),
+            "prev_id": int(state.prev_exp),
+            "accum_x": float(accum[0]),
+            "accum_y": float(accum[1]),
+            "accum_facing": float(accum[2]),
+            "accum_time": float(accum[3]),
+        }
+    )
     em.setdefault("relative_rad", 0.0)
+    from graph.experience_map import STATE_FORMAT, STATE_VERSION
+
+    em.setdefault("format", STATE_FORMAT)  # maps imported from the reference format
+    em.setdefault("version", STATE_VERSION)
     return em
 
 
-_EM_KNOWN = {"poses", "pc", "template_id", "frame", "t", "link_ends", "link_values",
-             "link_counts", "link_behaviour", "current_id", "prev_id", "accum_x", "accum_y",
-             "accum_facing", "accum_time"}
+_EM_KNOWN = {
+    "poses",
+    "pc",
+    "template_id",
+    "frame",
+    "t",
+    "link_ends",
+    "link_values",
+    "link_counts",
+    "link_behaviour",
+    "current_id",
+    "prev_id",
+    "accum_x",
+    "accum_y",
+    "accum_facing",
+    "accum_time",
+}
 
 
 def apply_experience_map(state: MapState, config: Any, *, passes: int | None = None) -> MapState:
@@ -638,7 +695,7 @@ def apply_experience_map(state: MapState, config: Any, *, passes: int | None = N
     return out
 
 
-def conform(state: MapState, config: Any) -> MapState:
+def conform(state: MapState, config: Any, *, what: str = "stored map") -> MapState:
     """``state`` made usable with ``config``: a reference-format map read without a
     config (templates ``(N, 1, S)``, no pose-cell sizes) gets its templates reshaped to
     the config's ``template_y_size x template_x_size`` and the config's pose-cell sizes;
@@ -657,18 +714,33 @@ def conform(state: MapState, config: Any) -> MapState:
     ):
         state = state.copy()
         state.templates = state.templates.reshape(-1, ty, tx)
-        state.config = {**flat, **{k: v for k, v in state.config.items()
-                                   if k not in ("template_x_size", "template_y_size")}}
+        state.config = {
+            **flat,
+            **{
+                k: v
+                for k, v in state.config.items()
+                if k not in ("template_x_size", "template_y_size")
+            },
+        }
     missing = [k for k in ("pc_dim_xy", "pc_dim_th") if k not in state.config]
     if state.scalars.get("imported_from") == "reference" and missing:
         state = state.copy()
         state.config.update({k: flat.get(k) for k in missing})
-    check_compatible(state, config)
+    check_compatible(state, config, what=what)
     return state
 
 
-_PC_KNOWN = {"activity", "template_pc", "template_decay", "exp_pc", "exp_template",
-             "current_exp", "current_vt", "prev_vt", "best"}
+_PC_KNOWN = {
+    "activity",
+    "template_pc",
+    "template_decay",
+    "exp_pc",
+    "exp_template",
+    "current_exp",
+    "current_vt",
+    "prev_vt",
+    "best",
+}
 _LV_KNOWN = {"templates", "means", "frames", "current_id", "previous_id", "template_shape"}
 
 
@@ -754,28 +826,35 @@ def apply_state(state: MapState, slam: Any, *, exp_ids: np.ndarray | None = None
     slam = getattr(slam, "slam", slam)
     state = conform(state, slam.config)
     lv = _collect("lv", state)
-    lv.update({
-        "templates": np.ascontiguousarray(state.templates),
-        "means": state.template_mean.copy(),
-        "frames": state.template_frame.copy(),
-        "current_id": int(state.current_vt),
-        "previous_id": int(state.prev_vt),
-        "template_shape": np.asarray(state.templates.shape[1:], np.int64),
-    })
+    lv.update(
+        {
+            "templates": np.ascontiguousarray(state.templates),
+            "means": state.template_mean.copy(),
+            "frames": state.template_frame.copy(),
+            "current_id": int(state.current_vt),
+            "previous_id": int(state.prev_vt),
+            "template_shape": np.asarray(state.templates.shape[1:], np.int64),
+        }
+    )
     lv.setdefault("kind", getattr(slam.local_view, "kind", "ratslam"))
+    lv_module = __import__(type(slam.local_view).__module__, fromlist=["STATE_VERSION"])
+    lv.setdefault("version", getattr(lv_module, "STATE_VERSION", 1))
     lv.setdefault("frame_counter", int(state.frame_index))
     pc = _collect("pc", state)
-    pc.update({
-        "activity": state.activity.copy(),
-        "template_pc": state.template_pc.copy(),
-        "template_decay": state.template_decay.copy(),
-        "exp_pc": state.exp_pc.copy(),
-        "exp_template": np.array(state.extra.get("exp:pc_template", state.exp_template),
-                                 dtype=np.int64, copy=True),
-        "current_exp": int(state.scalars.get("pc.current_exp", state.current_exp)),
-        "current_vt": int(state.current_vt),
-        "prev_vt": int(state.prev_vt),
-    })
+    pc.update(
+        {
+            "activity": state.activity.copy(),
+            "template_pc": state.template_pc.copy(),
+            "template_decay": state.template_decay.copy(),
+            "exp_pc": state.exp_pc.copy(),
+            "exp_template": np.array(
+                state.extra.get("exp:pc_template", state.exp_template), dtype=np.int64, copy=True
+            ),
+            "current_exp": int(state.scalars.get("pc.current_exp", state.current_exp)),
+            "current_vt": int(state.current_vt),
+            "prev_vt": int(state.prev_vt),
+        }
+    )
     pc["current_exp"] = int(state.scalars.get("pc.current_exp", state.current_exp))
     if PC_BEST in state.extra:
         pc["best"] = np.array(state.extra[PC_BEST], np.float64, copy=True)

@@ -67,7 +67,8 @@ def reference_select(m: MBARAM, x: dict, channels=None):
             a = counts[j] / (counts[j] + 1)
             b = 1 / (counts[j] + 1)
             mu, var = m.means(k)[j].tolist(), m.covariances(k)[j].tolist()
-            new = [a * v + b * (a * (xi - mi)) ** 2 for xi, mi, v in zip(x[k], mu, var)]
+            floor = m.params.var_floor_odometry if k == "odometry" else m.params.var_floor
+            new = [max(a * v + b * (a * (xi - mi)) ** 2, floor) for xi, mi, v in zip(x[k], mu, var)]
             ok &= math.prod(new) <= m.params.s_max  # Eqs. 7, 8, 10
         if ok:
             return j, score
@@ -365,7 +366,7 @@ def _raycast(x, y, th, n=682, fov_deg=240.0, rmax=30.0):
     return np.minimum(r, rmax)
 
 
-def corridor_lap(seed: int, step: float = 0.4):
+def corridor_lap(seed: int, step: float = 0.5):
     """One lap of the loop as Frames with 682-beam front/rear scans and noisy odometry."""
     rng = np.random.default_rng(seed)
     corners = np.array([[0, 0], [20, 0], [20, 8], [0, 8], [0, 0]], float)
@@ -388,7 +389,8 @@ def corridor_lap(seed: int, step: float = 0.4):
 @pytest.fixture(scope="module")
 def corridor_run():
     laps = [corridor_lap(seed) for seed in range(4)]
-    return run_mbaram(laps[:3], laps[3:], MBARAMParams(laser_scale=3.0, s_max_odometry=1e-4))
+    params = MBARAMParams(laser_scale=3.0, s_max_odometry=1e-4, var_floor_odometry=0.01)
+    return run_mbaram(laps[:3], laps[3:], params)
 
 
 def test_corridor_loop_map_converges_and_localises(corridor_run):
@@ -401,11 +403,11 @@ def test_corridor_loop_map_converges_and_localises(corridor_run):
     xy = r.node_xy
     in_corridor = ~((xy[:, 0] > 1) & (xy[:, 0] < 19) & (xy[:, 1] > 1) & (xy[:, 1] < 7))
     assert in_corridor.all()
-    assert r.metrics["qe_m"] < 3.0
+    assert r.metrics["qe_m"] < 1.5
     assert r.metrics["cr"] == pytest.approx(r.metrics["frames"] / r.metrics["nodes"])
     rate_with = r.metrics["localisation_rate_with_odometry"]
     rate_without = r.metrics["localisation_rate_without_odometry"]
-    assert rate_with >= 0.8 and rate_with >= rate_without
+    assert rate_with >= 0.5 and rate_with > rate_without
     # the graph is one connected loop
     assert nx.is_weakly_connected(r.model.graph)
 
@@ -416,3 +418,37 @@ def test_localisation_without_odometry_ignores_the_odometry_channel(corridor_run
     x = frame_inputs(f.scans, f.pose, m.params)
     far = {**x, "odometry": x["odometry"] + np.array([100.0, 100.0, 0.0])}
     assert m.localise(x, LASER_CHANNELS).node == m.localise(far, LASER_CHANNELS).node
+
+
+def test_cli_writes_metrics_and_figures(tmp_path):
+    pytest.importorskip("torchratslam.sim")
+    import json
+
+    from torchratslam.cli import main
+
+    out = tmp_path / "mb"
+    code = main(
+        [
+            "mbaram",
+            "--data",
+            "sim:loop?laps=2&frames=100",
+            "--out",
+            str(out),
+            "--laps",
+            "1",
+            "--loc-laps",
+            "1",
+            "--set",
+            "laser_scale=3",
+        ]
+    )
+    assert code == 0
+    m = json.loads((out / "metrics.json").read_text())
+    for key in ("nodes", "edges", "qe", "cr", "localisation_rate_with_odometry"):
+        assert key in m
+    assert 0 <= m["localisation_rate_without_odometry"] <= 1
+    assert m["cr"] == pytest.approx(m["frames"] / m["nodes"])
+    assert m["nodes_per_lap"] == [m["nodes"]]
+    for name in ("map.png", "nodes_per_lap.png", "localisation.png", "state.npz"):
+        assert (out / name).stat().st_size > 0
+    assert main(["mbaram", "--data", "sim:loop", "--out", str(out), "--set", "s_max=-1"]) == 2

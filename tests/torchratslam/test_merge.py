@@ -24,8 +24,16 @@ def links_for(poses, pairs):
     rows = []
     for a, b in pairs:
         dx, dy = poses[b, :2] - poses[a, :2]
-        rows.append((a, b, math.hypot(dx, dy), wrap(math.atan2(dy, dx) - poses[a, 2]),
-                     wrap(poses[b, 2] - poses[a, 2]), 1.0 + a))
+        rows.append(
+            (
+                a,
+                b,
+                math.hypot(dx, dy),
+                wrap(math.atan2(dy, dx) - poses[a, 2]),
+                wrap(poses[b, 2] - poses[a, 2]),
+                1.0 + a,
+            )
+        )
     return np.array(rows, dtype=np.float64).reshape(-1, 6)
 
 
@@ -36,8 +44,11 @@ def link_residual(state):
         a, b = state.link_from[k], state.link_to[k]
         ang = p[a, 2] + state.link_heading[k]
         pred = p[a, :2] + state.link_d[k] * np.array([math.cos(ang), math.sin(ang)])
-        out = max(out, float(np.abs(pred - p[b, :2]).max()),
-                  abs(float(wrap(p[a, 2] + state.link_facing[k] - p[b, 2]))))
+        out = max(
+            out,
+            float(np.abs(pred - p[b, :2]).max()),
+            abs(float(wrap(p[a, 2] + state.link_facing[k] - p[b, 2]))),
+        )
     return out
 
 
@@ -56,11 +67,17 @@ def make_map(poses, pcs, tpl_of_exp, templates, tpl_pc, pairs, activity=None, cu
         exp_template=np.asarray(tpl_of_exp, np.int64),
         exp_frame=np.arange(m, dtype=np.int64) * 3,
         exp_t=np.arange(m, dtype=np.float64) * 0.5,
-        link_from=lk[:, 0].astype(np.int64), link_to=lk[:, 1].astype(np.int64),
-        link_d=lk[:, 2], link_heading=lk[:, 3], link_facing=lk[:, 4], link_dt=lk[:, 5],
+        link_from=lk[:, 0].astype(np.int64),
+        link_to=lk[:, 1].astype(np.int64),
+        link_d=lk[:, 2],
+        link_heading=lk[:, 3],
+        link_facing=lk[:, 4],
+        link_dt=lk[:, 5],
         activity=np.zeros((12, 9, 9)) if activity is None else activity,
-        current_vt=n - 1, prev_vt=max(n - 2, -1),
-        current_exp=m - 1 if current is None else current, prev_exp=max(m - 2, -1),
+        current_vt=n - 1,
+        prev_vt=max(n - 2, -1),
+        current_exp=m - 1 if current is None else current,
+        prev_exp=max(m - 2, -1),
         frame_index=40,
         extra={"exp:count": np.arange(m, dtype=np.int64) + 100, "pc:flag": np.array([m])},
         scalars={"session": m},
@@ -84,8 +101,14 @@ def split(rng, n_l=7, n_p=6, frame=(0.7, -4.0, 2.5), pc_off=(5.4, 7.9, 10.5)):
     poses, pcs, templates = world(rng, n_l + n_p)
     lidx = np.arange(n_l)
     pidx = np.r_[np.arange(n_l, n_l + n_p - 1), 2]  # the partial map ends at world exp 2
-    loaded = make_map(poses[lidx], pcs[lidx], np.arange(n_l), templates[lidx], pcs[lidx],
-                      [(i, i + 1) for i in range(n_l - 1)] + [(n_l - 1, 0)])
+    loaded = make_map(
+        poses[lidx],
+        pcs[lidx],
+        np.arange(n_l),
+        templates[lidx],
+        pcs[lidx],
+        [(i, i + 1) for i in range(n_l - 1)] + [(n_l - 1, 0)],
+    )
     dth, tx, ty = frame
     c, s = math.cos(dth), math.sin(dth)
     pp = poses[pidx].copy()
@@ -95,8 +118,15 @@ def split(rng, n_l=7, n_p=6, frame=(0.7, -4.0, 2.5), pc_off=(5.4, 7.9, 10.5)):
     act = np.zeros((12, 9, 9))
     z = np.rint(ppc[-1]).astype(int) % np.array(DIMS)
     act[z[2], z[1], z[0]] = 1.0
-    partial = make_map(pp, ppc, np.arange(n_p), templates[pidx], ppc,
-                       [(i, i + 1) for i in range(n_p - 1)] + [(0, 2)], activity=act)
+    partial = make_map(
+        pp,
+        ppc,
+        np.arange(n_p),
+        templates[pidx],
+        ppc,
+        [(i, i + 1) for i in range(n_p - 1)] + [(0, 2)],
+        activity=act,
+    )
     return loaded, partial, (poses, pcs, pidx)
 
 
@@ -116,7 +146,7 @@ def test_known_transform_and_pc_shift_are_recovered(seed):
     d = pc_distance(m.exp_pc[n_l:], pcs[pidx[:-1]], DIMS)
     assert d.max() < 1e-9
     assert np.all((m.exp_pc >= 0) & (m.exp_pc < np.array(DIMS)))
-    assert pc_distance(m.template_pc[loaded.n_templates:], pcs[pidx[:-1]], DIMS).max() < 1e-9
+    assert pc_distance(m.template_pc[loaded.n_templates :], pcs[pidx[:-1]], DIMS).max() < 1e-9
     # the links are still satisfied by the poses, including the re-pointed ones
     assert link_residual(m) < 1e-9
     assert m.n_experiences == n_l + n_p - 1 and m.n_templates == n_l + n_p - 1
@@ -177,8 +207,15 @@ def reference_merge(loaded, partial, u, e_u, rel=0.0):
         pc = [(partial.exp_pc[j][k] + delta[k]) % DIMS[k] for k in range(3)]
         exps.append((nx, ny, wrap(th + dth), *pc, tmap[int(partial.exp_template[j])]))
     for k in range(partial.n_links):
-        links.append((emap[int(partial.link_from[k])], emap[int(partial.link_to[k])],
-                      partial.link_d[k], partial.link_heading[k], partial.link_facing[k]))
+        links.append(
+            (
+                emap[int(partial.link_from[k])],
+                emap[int(partial.link_to[k])],
+                partial.link_d[k],
+                partial.link_heading[k],
+                partial.link_facing[k],
+            )
+        )
     return np.array(exps), np.array(links)
 
 
@@ -192,17 +229,18 @@ def test_vectorised_merge_equals_a_loop_reference(seed):
     m, n_el = res.state, loaded.n_experiences
     got = np.c_[m.exp_pose[n_el:], m.exp_pc[n_el:], m.exp_template[n_el:]]
     assert np.allclose(got, exps, atol=1e-12)
-    gl = np.c_[m.link_from, m.link_to, m.link_d, m.link_heading, m.link_facing][loaded.n_links:]
+    gl = np.c_[m.link_from, m.link_to, m.link_d, m.link_heading, m.link_facing][loaded.n_links :]
     assert np.allclose(gl, links)
     # loaded part untouched, partial templates appended in order, the last one dropped
     assert np.array_equal(m.exp_pose[:n_el], loaded.exp_pose)
     assert np.array_equal(m.templates[: loaded.n_templates], loaded.templates)
-    assert np.array_equal(m.templates[loaded.n_templates:], partial.templates[:-1])
-    assert np.array_equal(m.template_decay[loaded.n_templates:], partial.template_decay[:-1])
+    assert np.array_equal(m.templates[loaded.n_templates :], partial.templates[:-1])
+    assert np.array_equal(m.template_decay[loaded.n_templates :], partial.template_decay[:-1])
     assert np.array_equal(m.exp_frame[n_el:], partial.exp_frame[:-1])
     # per-experience extras concatenated, session extras and scalars from the partial map
-    assert np.array_equal(m.extra["exp:count"], np.r_[loaded.extra["exp:count"],
-                                                       partial.extra["exp:count"][:-1]])
+    assert np.array_equal(
+        m.extra["exp:count"], np.r_[loaded.extra["exp:count"], partial.extra["exp:count"][:-1]]
+    )
     assert np.array_equal(m.extra["pc:flag"], partial.extra["pc:flag"])
     assert m.scalars == partial.scalars and m.frame_index == partial.frame_index
     # current ids follow the robot: it stands at the loaded match
@@ -216,8 +254,8 @@ def test_the_ablation_keeps_partial_associations_but_moves_the_activity():
     loaded, partial, _ = split(rng)
     res = merge_maps(loaded, partial, 2, shift_pose_cells=False)
     m = res.state
-    assert np.array_equal(m.template_pc[loaded.n_templates:], partial.template_pc[:-1])
-    assert np.array_equal(m.exp_pc[loaded.n_experiences:], partial.exp_pc[:-1])
+    assert np.array_equal(m.template_pc[loaded.n_templates :], partial.template_pc[:-1])
+    assert np.array_equal(m.exp_pc[loaded.n_experiences :], partial.exp_pc[:-1])
     shifted = merge_maps(loaded, partial, 2).state
     assert np.array_equal(m.activity, shifted.activity)
     assert np.array_equal(m.exp_pose, shifted.exp_pose)
@@ -227,8 +265,14 @@ def test_first_view_match_continues_in_the_loaded_map():
     """Scenario (i): a one-template, one-experience partial map adds nothing."""
     rng = np.random.default_rng(2)
     loaded, _, _ = split(rng)
-    partial = make_map(np.array([[3.0, 1.0, 0.2]]), np.array([[4.0, 4.0, 6.0]]), [0],
-                       rng.random((1, 8)), np.array([[4.0, 4.0, 6.0]]), [])
+    partial = make_map(
+        np.array([[3.0, 1.0, 0.2]]),
+        np.array([[4.0, 4.0, 6.0]]),
+        [0],
+        rng.random((1, 8)),
+        np.array([[4.0, 4.0, 6.0]]),
+        [],
+    )
     res = merge_maps(loaded, partial, 4)
     m = res.state
     assert m.summary() == loaded.summary()
@@ -269,8 +313,10 @@ def _cli_maps(tmp_path, *, match=True):
     if not match:
         partial.templates[-1] = 1.0 - loaded.templates[2]
     cfg = tmp_path / "c.yaml"
-    cfg.write_text("pc_dim_xy: 9\npc_dim_th: 12\ntemplate_x_size: 4\ntemplate_y_size: 2\n"
-                   "vt_shift_match: 0\nvt_step_match: 1\nvt_match_threshold: 0.01\n")
+    cfg.write_text(
+        "pc_dim_xy: 9\npc_dim_th: 12\ntemplate_x_size: 4\ntemplate_y_size: 2\n"
+        "vt_shift_match: 0\nvt_step_match: 1\nvt_match_threshold: 0.01\n"
+    )
     save_map(loaded, tmp_path / "loaded")
     save_map(partial, tmp_path / "partial")
     return loaded, partial, cfg
@@ -282,9 +328,21 @@ def test_cli_merge_writes_the_merged_map(tmp_path, capsys, fmt):
     from torchratslam.state import load_state
 
     loaded, partial, cfg = _cli_maps(tmp_path)
-    code = main(["merge", "--config", str(cfg), "--loaded", str(tmp_path / "loaded"),
-                 "--partial", str(tmp_path / "partial"), "--out", str(tmp_path / "m"),
-                 "--format", fmt])
+    code = main(
+        [
+            "merge",
+            "--config",
+            str(cfg),
+            "--loaded",
+            str(tmp_path / "loaded"),
+            "--partial",
+            str(tmp_path / "partial"),
+            "--out",
+            str(tmp_path / "m"),
+            "--format",
+            fmt,
+        ]
+    )
     assert code == 0
     assert '"loaded_template": 2' in capsys.readouterr().out
     from torchratslam.config import load_config
@@ -300,8 +358,19 @@ def test_cli_merge_without_a_match_is_an_error_and_writes_nothing(tmp_path, caps
     from torchratslam.cli import main
 
     _, _, cfg = _cli_maps(tmp_path, match=False)
-    code = main(["merge", "--config", str(cfg), "--loaded", str(tmp_path / "loaded"),
-                 "--partial", str(tmp_path / "partial"), "--out", str(tmp_path / "m")])
+    code = main(
+        [
+            "merge",
+            "--config",
+            str(cfg),
+            "--loaded",
+            str(tmp_path / "loaded"),
+            "--partial",
+            str(tmp_path / "partial"),
+            "--out",
+            str(tmp_path / "m"),
+        ]
+    )
     assert code == 2
     assert "matches no loaded template" in capsys.readouterr().err
     assert not (tmp_path / "m").exists()

@@ -46,8 +46,11 @@ def session2(tour, session1_map):
 def run_session2(tour, stored, frames, **kw):
     ms = MultiSessionRatSLAM(CONFIG, [stored], session="session2", **kw)
     counts = []
-    ms.run(tour.sessions[1].frames(0, frames), progress=False,
-           callback=lambda r: counts.append((r.frame, r.templates, r.experiences)))
+    ms.run(
+        tour.sessions[1].frames(0, frames),
+        progress=False,
+        callback=lambda r: counts.append((r.frame, r.templates, r.experiences)),
+    )
     return ms, np.array(counts)
 
 
@@ -120,8 +123,19 @@ def test_multisession_cli_writes_the_report(tmp_path, capsys):
     from torchratslam.cli import main
 
     out = tmp_path / "ms"
-    code = main(["multisession", "--tour", "sim:virtual_tour", "--out", str(out),
-                 "--max-frames", "10", "--quiet", "--ablation"])
+    code = main(
+        [
+            "multisession",
+            "--tour",
+            "sim:virtual_tour",
+            "--out",
+            str(out),
+            "--max-frames",
+            "10",
+            "--quiet",
+            "--ablation",
+        ]
+    )
     assert code == 0
     rep = json.loads((out / "report.json").read_text())
     for key in ("single", "multi", "ablation_no_pc_shift"):
@@ -130,3 +144,23 @@ def test_multisession_cli_writes_the_report(tmp_path, capsys):
     assert (out / "multi" / "session1" / "state" / "state.json").exists()
     assert (out / "fig9a_single.png").exists() and (out / "report.md").exists()
     assert "ICP RMSE" in capsys.readouterr().out
+
+
+def test_two_stored_maps_are_merged_one_after_the_other(tour):
+    """kappa = 2: session 1 split in two separately mapped halves; session 2 meets the
+    first half, then the second, and ends in one connected map."""
+    frames = list(tour.sessions[0].frames())
+    halves = []
+    for part in (frames[:50], frames[56:]):
+        slam = RatSLAM(CONFIG)
+        slam.run(part, progress=False)
+        halves.append(state_from_slam(slam))
+    ms = MultiSessionRatSLAM(CONFIG, halves, names=["first", "second"], session="s2")
+    ms.run(tour.sessions[1].frames(0, 100), progress=False)
+    assert [m["map_name"] for m in ms.merges] == ["first", "second"]
+    assert ms.merges[0]["frame"] < 25 < 19 + 56 - 3 <= ms.merges[1]["frame"] <= 19 + 56 + 5
+    assert ms.pending == [] and nx.is_weakly_connected(ms.experience_map.graph)
+    st = ms.get_map()
+    # every template of both halves is kept, in the merged map's order: second, first, new
+    assert st.n_templates >= halves[0].n_templates + halves[1].n_templates
+    assert np.array_equal(st.templates[: halves[1].n_templates], halves[1].templates)

@@ -469,17 +469,18 @@ def test_first_steps_and_recent_templates():
         pc.on_view_template(ViewMatch(5))
 
 
-def test_state_round_trip_continues_bit_identically():
-    p = PoseCellParams(pc_dim_xy=15, pc_dim_th=36, pc_vt_inject_energy=0.3)
+@pytest.mark.parametrize(("xy", "method"), [(15, "auto"), (41, "crop")])
+def test_state_round_trip_continues_bit_identically(xy, method):
+    p = PoseCellParams(pc_dim_xy=xy, pc_dim_th=36, pc_vt_inject_energy=0.3)
     stream = list(scripted_views(120, seed=10))
-    a = PoseCells(p)
+    a = PoseCells(p, method=method)
     for _t, m, (v, w) in stream[:70]:
         a.on_view_template(m)
         a.on_odometry(v, w, 1.0)
     state = a.get_state()
     for key, value in state.items():
         assert isinstance(value, (np.ndarray, int, float, bool)), key
-    b = PoseCells(p)
+    b = PoseCells(p, method=method)
     b.set_state({k: (v.copy() if isinstance(v, np.ndarray) else v) for k, v in state.items()})
     for _t, m, (v, w) in stream[70:]:
         for pc in (a, b):
@@ -489,9 +490,43 @@ def test_state_round_trip_continues_bit_identically():
         assert a.centre == b.centre
         assert torch.equal(a.activity, b.activity)
     with pytest.raises(MapFormatError, match="pc_dim_xy"):
-        PoseCells(p.replace(pc_dim_xy=21)).set_state(state)
+        PoseCells(p.replace(pc_dim_xy=xy + 2)).set_state(state)
     with pytest.raises(MapFormatError, match="lacks 'exp_pc'"):
         PoseCells(p).set_state({"template_pc": np.zeros((0, 3))})
+
+
+def test_state_without_activity_restarts_the_packet_at_the_current_experience():
+    p = PoseCellParams(pc_dim_xy=11)
+    pc = PoseCells(p)
+    state = {
+        "template_pc": np.array([[1.0, 2.0, 3.0], [7.2, 8.9, 30.5]]),
+        "exp_pc": np.array([[1.0, 2.0, 3.0], [7.2, 8.9, 30.5]]),
+        "exp_template": np.array([0, 1]),
+        "current_exp": 1,
+        "activity": np.zeros((0, 0, 0)),
+    }
+    pc.set_state(state)
+    assert pc.activity[30, 8, 7] == 1.0 and float(pc.activity.sum()) == 1.0
+    assert pc.centre == pytest.approx((7.2, 8.9, 30.5))
+    assert pc.template_experiences(1) == [1]
+
+
+def test_auto_method_crops_only_large_networks():
+    assert PoseCellNetwork(PoseCellParams(pc_dim_xy=11)).method == "separable"
+    assert PoseCellNetwork(PoseCellParams(pc_dim_xy=21)).method == "separable"
+    assert PoseCellNetwork(PoseCellParams(pc_dim_xy=80)).method == "crop"
+    assert PoseCellNetwork(PoseCellParams(pc_dim_xy=21), 32).method == "crop"
+
+
+def test_crop_notices_activity_written_from_outside():
+    p = PoseCellParams(pc_dim_xy=41, pc_dim_th=36)
+    nets = [packet_net(p, (20, 20, 18), method=m, settle=6) for m in ("crop", "separable")]
+    for net in nets:
+        with torch.no_grad():
+            net.activity[0, 2, 37, 3] += 0.4  # e.g. a map merge editing the buffer
+        net.step(0.5, 0.1, 1.0)
+    assert nets[0].activity[0, 2, 37, 3] > 0  # the far cell was processed, not dropped
+    np.testing.assert_allclose(nets[0].activity.numpy(), nets[1].activity.numpy(), atol=1e-12)
 
 
 def test_registered_as_ratslam():

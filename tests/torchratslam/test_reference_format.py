@@ -139,15 +139,27 @@ def test_round_trip_keeps_everything_the_format_holds(tmp_path):
     n, m, el = 4, 6, 7
     s = MapState(
         config=dict(CFG),
-        templates=rng.random((n, 2, 3)), template_mean=rng.random(n),
-        template_frame=np.full(n, -1), template_pc=rng.random((n, 3)) * 5,
-        template_decay=rng.random(n), exp_pose=rng.normal(size=(m, 3)),
-        exp_pc=rng.random((m, 3)) * 5, exp_template=np.array([0, 1, 1, 2, 3, 3]),
-        exp_frame=np.full(m, -1), exp_t=np.zeros(m),
-        link_from=np.array([0, 1, 2, 3, 4, 5, 0]), link_to=np.array([1, 2, 3, 4, 5, 0, 3]),
-        link_d=rng.random(el), link_heading=rng.normal(size=el),
-        link_facing=rng.normal(size=el), link_dt=rng.random(el),
-        activity=np.zeros((0, 0, 0)), current_vt=3, prev_vt=2, current_exp=5, prev_exp=4,
+        templates=rng.random((n, 2, 3)),
+        template_mean=rng.random(n),
+        template_frame=np.full(n, -1),
+        template_pc=rng.random((n, 3)) * 5,
+        template_decay=rng.random(n),
+        exp_pose=rng.normal(size=(m, 3)),
+        exp_pc=rng.random((m, 3)) * 5,
+        exp_template=np.array([0, 1, 1, 2, 3, 3]),
+        exp_frame=np.full(m, -1),
+        exp_t=np.zeros(m),
+        link_from=np.array([0, 1, 2, 3, 4, 5, 0]),
+        link_to=np.array([1, 2, 3, 4, 5, 0, 3]),
+        link_d=rng.random(el),
+        link_heading=rng.normal(size=el),
+        link_facing=rng.normal(size=el),
+        link_dt=rng.random(el),
+        activity=np.zeros((0, 0, 0)),
+        current_vt=3,
+        prev_vt=2,
+        current_exp=5,
+        prev_exp=4,
         scalars={"imported_from": "reference"},
     ).validate()
     write_reference(s, tmp_path / "out")
@@ -201,3 +213,29 @@ def test_export_refuses_a_directory_with_other_files(tmp_path):
     with pytest.raises(InputError, match="other than a reference map"):
         write_reference(s, tmp_path / "x")
     assert (tmp_path / "x" / "mine.txt").read_text() == "keep"
+
+
+def test_a_reference_map_runs_in_the_pipeline(tmp_path):
+    """Imported (no activity, no config in the files), then loaded into a RatSLAM."""
+    import torch
+
+    from torchratslam.config import load_config
+    from torchratslam.pipeline import RatSLAM
+    from torchratslam.state import apply_state, state_from_slam
+
+    write_hand(tmp_path / "ref")
+    cfg = load_config(**CFG, vt_shift_match=0, vt_step_match=1)
+    s = load_state(tmp_path / "ref")  # without a config: templates read as (1, 6)
+    assert s.templates.shape == (2, 1, 6)
+    slam = RatSLAM(cfg, dtype=torch.float64)
+    apply_state(s, slam)
+    back = state_from_slam(slam)
+    assert np.array_equal(back.templates, s.templates.reshape(2, 2, 3))
+    assert np.array_equal(back.exp_pose, s.exp_pose)
+    assert np.array_equal(back.template_pc, s.template_pc)
+    assert back.current_exp == 2 and back.activity.shape == (8, 5, 5)
+    # the packet restarts at the current experience's cell
+    th, y, x = np.unravel_index(np.argmax(back.activity), back.activity.shape)
+    assert (x, y, th) == (2, 3, 6)
+    slam.step(np.full((2, 3), 128, np.uint8), (0.1, 0.0, 1.0))  # and it keeps mapping
+    assert len(slam.local_view) >= 2

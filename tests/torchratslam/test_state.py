@@ -182,9 +182,16 @@ def test_invalid_map_is_never_written(tmp_path):
 
 def test_config_compatibility(tmp_path):
     s = random_map()
-    check_compatible(s, load_config(**{k: CONFIG[k] for k in
-                                       ("pc_dim_xy", "pc_dim_th", "template_x_size",
-                                        "template_y_size")}, vt_match_threshold=0.2))
+    check_compatible(
+        s,
+        load_config(
+            **{
+                k: CONFIG[k]
+                for k in ("pc_dim_xy", "pc_dim_th", "template_x_size", "template_y_size")
+            },
+            vt_match_threshold=0.2,
+        ),
+    )
     with pytest.raises(MapFormatError, match=r"pc_dim_xy = 7 in the map but 21 in the config"):
         check_compatible(s, load_config())
     save_map(s, tmp_path / "m")

@@ -20,6 +20,13 @@ import numpy as np
 from graph.errors import ConfigError, InputError
 from torchratslam.messages import Frame
 
+# parameter presets: the paper's Table 3 values, and those used for the results in
+# docs/readme/mbaram.md (paper values plus units and the odometry channel's S_MAX,k)
+PRESETS: dict[str, dict[str, float]] = {
+    "paper": {},
+    "sim": {"laser_scale": 3.0, "s_max_odometry": 3e-5, "var_floor_odometry": 0.01},
+}
+
 # the paper's robot experiment (Section 3.4) and Rawseeds results, for the figures
 PAPER = {
     "nodes_per_lap": [24, 6, 6, 6, 5],
@@ -58,11 +65,18 @@ def register(subparsers: Any) -> argparse.ArgumentParser:
         "or dead reckoning of the noisy odometry",
     )
     p.add_argument(
+        "--preset",
+        choices=sorted(PRESETS),
+        default="sim",
+        help="parameter preset: paper (Table 3 as printed) or sim (paper values with laser "
+        "units and the odometry channel's S_MAX,k set for the simulated tours)",
+    )
+    p.add_argument(
         "--set",
         action="append",
         default=[],
         metavar="KEY=VALUE",
-        help="an MBARAM parameter, e.g. --set laser_scale=5 (repeatable)",
+        help="an MBARAM parameter over the preset, e.g. --set laser_scale=5 (repeatable)",
     )
     p.add_argument("--no-plots", action="store_true", help="skip the figures")
     p.set_defaults(func=main)
@@ -205,7 +219,7 @@ def main(args: argparse.Namespace) -> int:
             f"--data {args.data!r}: MBARAM needs laser scans, which only the simulator "
             "provides for now; use sim:NAME (e.g. sim:loop)"
         )
-    params = MBARAMParams.from_dict(_parse_sets(args.set))
+    params = MBARAMParams.from_dict({**PRESETS[args.preset], **_parse_sets(args.set)})
     torch.set_num_threads(1)
     session = sim_session(
         args.data,
@@ -231,17 +245,17 @@ def main(args: argparse.Namespace) -> int:
         "seed": args.seed,
         "moving_obstacles": args.moving_obstacles,
         "moved_obstacles": args.moved_obstacles,
+        "preset": args.preset,
         "laps": len(map_r),
         "loc_laps": len(loc_r),
         "paper": PAPER,
     }
     _atomic_write(out / "metrics.json", json.dumps(metrics, indent=2) + "\n")
     state = result.model.get_state()
-    np.savez(
-        out / "state.npz",
-        **{k.replace("/", "__"): np.asarray(v) for k, v in state.items() if k != "params"},
-        node_xy=result.node_xy,
-    )
+    arrays = {k.replace("/", "__"): np.asarray(v) for k, v in state.items() if k != "params"}
+    tmp = out / ".state.tmp.npz"
+    np.savez(tmp, **arrays, node_xy=result.node_xy)
+    os.replace(tmp, out / "state.npz")
     if not args.no_plots:
         plot_results(result, session, out)
     m = result.metrics

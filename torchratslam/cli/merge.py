@@ -32,12 +32,22 @@ def register(subparsers: Any) -> argparse.ArgumentParser:
     p.add_argument("--loaded", required=True, help="the stored map (its frame is kept)")
     p.add_argument("--partial", required=True, help="the map to merge into it")
     p.add_argument("--out", required=True, help="output directory for the merged map")
-    p.add_argument("--format", choices=("native", "reference"), default="native",
-                   help="output format (default: native)")
-    p.add_argument("--no-pc-shift", action="store_true",
-                   help="skip the pose-cell association shift (the paper's Fig. 12 ablation)")
-    p.add_argument("--relax", action="store_true",
-                   help="relax the merged map once (exp_loops passes, exp_backend)")
+    p.add_argument(
+        "--format",
+        choices=("native", "reference"),
+        default="native",
+        help="output format (default: native)",
+    )
+    p.add_argument(
+        "--no-pc-shift",
+        action="store_true",
+        help="skip the pose-cell association shift (the paper's Fig. 12 ablation)",
+    )
+    p.add_argument(
+        "--relax",
+        action="store_true",
+        help="relax the merged map once (exp_loops passes, exp_backend)",
+    )
     p.set_defaults(func=main)
     return p
 
@@ -86,8 +96,7 @@ def main(args: argparse.Namespace) -> int:
     loaded = load_state(args.loaded, config)
     partial = load_state(args.partial, config)
     tid, rel, err = match_last_template(loaded, partial, config)
-    res = merge_maps(loaded, partial, tid, relative_rad=rel,
-                     shift_pose_cells=not args.no_pc_shift)
+    res = merge_maps(loaded, partial, tid, relative_rad=rel, shift_pose_cells=not args.no_pc_shift)
     merged = res.state
     if args.relax:
         merged = apply_experience_map(merged, config)

@@ -33,19 +33,37 @@ def register(subparsers: Any) -> argparse.ArgumentParser:
         description=__doc__,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    p.add_argument("--config", default=None,
-                   help="config file or shipped name (default: the tour's own config)")
+    p.add_argument(
+        "--config",
+        default=None,
+        help="config file or shipped name (default: the tour's own config)",
+    )
     p.add_argument("--tour", required=True, help="sim:NAME (virtual_tour, lab_tour, irat_like)")
     p.add_argument("--out", required=True, help="output directory")
-    p.add_argument("--ablation", action="store_true",
-                   help="also map without the pose-cell shift (the paper's Fig. 12)")
-    p.add_argument("--backends", default="",
-                   help="comma-separated relaxation backends to compare, e.g. alpha,gtsam")
-    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
-                   help="override a config key (repeatable)")
+    p.add_argument(
+        "--ablation",
+        action="store_true",
+        help="also map without the pose-cell shift (the paper's Fig. 12)",
+    )
+    p.add_argument(
+        "--backends",
+        default="",
+        help="comma-separated relaxation backends to compare, e.g. alpha,gtsam",
+    )
+    p.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="override a config key (repeatable)",
+    )
     p.add_argument("--seed", type=int, default=0, help="simulator seed (default 0)")
-    p.add_argument("--max-frames", type=int, default=None,
-                   help="at most this many frames per session (quick checks)")
+    p.add_argument(
+        "--max-frames",
+        type=int,
+        default=None,
+        help="at most this many frames per session (quick checks)",
+    )
     p.add_argument("--no-figures", action="store_true", help="write report.json only")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
     p.set_defaults(func=main)
@@ -75,8 +93,9 @@ def _write_json(path: Path, obj: Any) -> None:
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
     try:
         with os.fdopen(fd, "w") as fh:
-            json.dump(obj, fh, indent=1, default=lambda v: v.item() if hasattr(v, "item") else
-                      str(v))
+            json.dump(
+                obj, fh, indent=1, default=lambda v: v.item() if hasattr(v, "item") else str(v)
+            )
         os.replace(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
@@ -89,7 +108,11 @@ def _fmt(v: Any, spec: str = ".4g") -> str:
 
 def report_markdown(report: dict[str, Any]) -> str:
     """The report as Markdown tables (what the demo prints and the README shows)."""
-    rows = [("single session", report["single"]), ("multisession", report["multi"])]
+    rows = [
+        ("single session, all sessions concatenated", report["single"]),
+        (f"single session, {report['sessions'][-1]} alone", report["single_last_session"]),
+        ("multisession", report["multi"]),
+    ]
     if "ablation_no_pc_shift" in report:
         rows.append(("multisession, no pose-cell shift", report["ablation_no_pc_shift"]))
     lines = [
@@ -99,30 +122,54 @@ def report_markdown(report: dict[str, Any]) -> str:
         "|---|---|---|---|---|---|",
     ]
     for name, r in rows:
-        lines.append(f"| {name} | {r['templates']} | {r['experiences']} | {r['links']} | "
-                     f"{_fmt(r['ate_rmse_m'])} | {r.get('maps', 1)} |")
+        lines.append(
+            f"| {name} | {r['templates']} | {r['experiences']} | {r['links']} | "
+            f"{_fmt(r['ate_rmse_m'])} | {r.get('maps', 1)} |"
+        )
     lines += [
         "",
         f"- ICP RMSE multisession vs single-session map: {_fmt(report['icp_rmse'])} m "
         f"({_fmt(report['icp_rmse_relative'])} of the tour's {report['tour_extent_m']:.1f} m "
         f"extent); the paper reports {_fmt(report['paper_icp_rmse'])}",
-        f"- experiences, multi vs single: {_fmt(report['experiences_difference_relative'], '+.1%')}",
-        "- merges: " + (", ".join(f"{m['session']} frame {m['frame']} with {m['map']}"
-                                  for m in report["merges"]) or "none"),
+        f"- ICP RMSE multisession vs {report['sessions'][-1]} alone: "
+        f"{_fmt(report['icp_rmse_last_session'])} m",
+        "- experiences, multi vs single: "
+        + _fmt(report["experiences_difference_relative"], "+.1%")
+        + f" (concatenated), vs {report['sessions'][-1]} alone: "
+        + _fmt(report["experiences_difference_relative_last_session"], "+.1%"),
+        "- merges: "
+        + (
+            ", ".join(
+                f"{m['session']} frame {m['frame']} with {m['map']}" for m in report["merges"]
+            )
+            or "none"
+        ),
     ]
     if "backends" in report:
-        lines += ["", "| backend (whole multisession run) | graph error | ATE (m) | "
-                  "relaxation time (s) | experiences |", "|---|---|---|---|---|"]
+        lines += [
+            "",
+            "| backend (whole multisession run) | graph error | ATE (m) | "
+            "relaxation time (s) | experiences |",
+            "|---|---|---|---|---|",
+        ]
         for name, b in report["backends"].items():
-            lines.append(f"| {name} | {_fmt(b['error'])} | {_fmt(b['ate_rmse_m'])} | "
-                         f"{_fmt(b['time_s'], '.3f')} | {b['experiences']} |")
+            lines.append(
+                f"| {name} | {_fmt(b['error'])} | {_fmt(b['ate_rmse_m'])} | "
+                f"{_fmt(b['time_s'], '.3f')} | {b['experiences']} |"
+            )
         if "backends_final_map" in report:
-            lines += ["", "relaxing the final multisession map's graph once more:", "",
-                      "| backend | initial error | error after | ATE (m) | time (s) |",
-                      "|---|---|---|---|---|"]
+            lines += [
+                "",
+                "relaxing the final multisession map's graph once more:",
+                "",
+                "| backend | initial error | error after | ATE (m) | time (s) |",
+                "|---|---|---|---|---|",
+            ]
             for name, r in report["backends_final_map"].items():
-                lines.append(f"| {name} | {_fmt(r['initial_error'])} | {_fmt(r['error'])} | "
-                             f"{_fmt(r['ate_rmse_m'])} | {_fmt(r['time_s'], '.3f')} |")
+                lines.append(
+                    f"| {name} | {_fmt(r['initial_error'])} | {_fmt(r['error'])} | "
+                    f"{_fmt(r['ate_rmse_m'])} | {_fmt(r['time_s'], '.3f')} |"
+                )
     return "\n".join(lines) + "\n"
 
 
@@ -194,8 +241,14 @@ def write_figures(result: dict[str, Any], out: Path) -> list[Path]:
         _draw(ax, st.exp_pose[:n_l], lk[(lk < n_l).all(1)], SESSION_COLOURS[0], "loaded")
         part = np.r_[snap["merged"][m0["loaded_exp"]][None], st.exp_pose[n_l:]]
         _draw(ax, part, np.zeros((0, 2)), SESSION_COLOURS[1], "partial, transformed")
-        ax.scatter(*st.exp_pose[m0["loaded_exp"], :2], s=120, facecolors="none",
-                   edgecolors="red", label="merge point", zorder=4)
+        ax.scatter(
+            *st.exp_pose[m0["loaded_exp"], :2],
+            s=120,
+            facecolors="none",
+            edgecolors="red",
+            label="merge point",
+            zorder=4,
+        )
         ax.set_title("d) after the merge")
         save(fig, "fig9d_after_merge.png")
 
@@ -208,8 +261,13 @@ def write_figures(result: dict[str, Any], out: Path) -> list[Path]:
             remap = np.full(final.n_experiences, -1)
             remap[sel] = np.arange(sel.size)
             lk = remap[links(final)]
-            _draw(ax, final.exp_pose[sel], lk[(lk >= 0).all(1)],
-                  SESSION_COLOURS[k % len(SESSION_COLOURS)], f"from {report['sessions'][k]}")
+            _draw(
+                ax,
+                final.exp_pose[sel],
+                lk[(lk >= 0).all(1)],
+                SESSION_COLOURS[k % len(SESSION_COLOURS)],
+                f"from {report['sessions'][k]}",
+            )
     ax.set_title("e) final multisession map, by session of origin")
     save(fig, "fig9e_final.png")
 
@@ -231,10 +289,19 @@ def write_figures(result: dict[str, Any], out: Path) -> list[Path]:
     return paths
 
 
-def run(config: Any, tour_spec: str, out: str | Path, *, ablation: bool = False,
-        backends: tuple[str, ...] = (), seed: int = 0, max_frames: int | None = None,
-        figures: bool = True, progress: bool = False,
-        overrides: dict[str, Any] | None = None) -> dict[str, Any]:
+def run(
+    config: Any,
+    tour_spec: str,
+    out: str | Path,
+    *,
+    ablation: bool = False,
+    backends: tuple[str, ...] = (),
+    seed: int = 0,
+    max_frames: int | None = None,
+    figures: bool = True,
+    progress: bool = False,
+    overrides: dict[str, Any] | None = None,
+) -> dict[str, Any]:
     """Run the experiment and write OUT (what the CLI and the demo call).
 
     Args:
@@ -258,8 +325,15 @@ def run(config: Any, tour_spec: str, out: str | Path, *, ablation: bool = False,
     tour = get_tour(name, seed=seed)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    result = run_tour(config, tour, ablation=ablation, backends=tuple(backends),
-                      save_dir=out, progress=progress, max_frames=max_frames)
+    result = run_tour(
+        config,
+        tour,
+        ablation=ablation,
+        backends=tuple(backends),
+        save_dir=out,
+        progress=progress,
+        max_frames=max_frames,
+    )
     report = result["report"]
     report["seed"] = seed
     report["config"] = config.to_flat()
@@ -281,9 +355,18 @@ def main(args: argparse.Namespace) -> int:
         if not sep:
             raise ConfigError(f"--set {item!r}: expected KEY=VALUE")
         overrides[key.strip()] = value.strip()
-    result = run(args.config, args.tour, args.out, ablation=args.ablation, backends=backends,
-                 seed=args.seed, max_frames=args.max_frames, figures=not args.no_figures,
-                 progress=not args.quiet, overrides=overrides)
+    result = run(
+        args.config,
+        args.tour,
+        args.out,
+        ablation=args.ablation,
+        backends=backends,
+        seed=args.seed,
+        max_frames=args.max_frames,
+        figures=not args.no_figures,
+        progress=not args.quiet,
+        overrides=overrides,
+    )
     print(report_markdown(result["report"]))
     print(f"wrote {Path(args.out) / 'report.json'}")
     return 0
