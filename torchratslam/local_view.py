@@ -38,9 +38,11 @@ when a cheap lower bound of their error already exceeds the best error found; bo
 are never used to decide a match, only to skip work that cannot change the answer.
 Unlike OpenRatSLAM, templates are not skipped by ``|mean difference| >
 vt_match_threshold``: that rule is exact in panoramic mode but not in normal mode (the
-compared columns are a window, whose mean differs from the template's), and it would
-change the reported error of a novel view. Here the reported error is always the true
-minimum.
+compared columns are a window, whose mean differs from the template's). ``match()``
+always reports the true minimum error; :meth:`LocalView.process` stops as soon as every
+candidate is provably above ``vt_match_threshold``, so for a new template its
+``ViewMatch.error`` is a lower bound (> threshold) of the best error unless
+``exact_errors=True``. The decision is the brute-force one either way.
 """
 
 from __future__ import annotations
@@ -352,16 +354,16 @@ class TemplateMatcher:
     The search is a cascade of lower bounds of a pair's sum of absolute differences
     (SAD), each cheaper than the next level: a template or a pair is skipped only when
     its bound exceeds the best SAD already found (plus a rounding margin), so the answer
-    equals a brute-force loop's. With ``G`` groups of rows and their column sums
-    (``gsum``), the triangle inequality gives (successive elimination, as in block
-    matching):
+    equals a brute-force loop's. With ``G = min(4, Y)`` groups of rows, the triangle
+    inequality gives (successive elimination, as in block matching):
 
-    * panoramic, per template (any offset): the L1 distance between the view's and the
-      template's group column sums, each sorted along the columns (sorting gives the
-      least L1 over all column permutations, circular shifts included);
-    * normal mode, per (template, offset): the L1 distance of the compared window's
-      group totals (from cumulative sums);
-    * per (template, offset): the L1 distance of the group column-sum profiles.
+    * panoramic, per template (valid at every offset): the L1 distance between the
+      view's and the template's group column sums, each sorted along the columns
+      (sorting gives the least L1 over all column permutations, circular shifts
+      included);
+    * per (template, offset): the L1 distance between the compared pixels summed over
+      the G row groups and ``B = min(8, W)`` blocks of columns (the templates' pooled
+      sums are computed once, when they are added: at every offset in normal mode).
 
     Exact errors are then evaluated for the surviving pairs in increasing order of their
     bound, in chunks that grow geometrically, stopping when the next bound exceeds the
@@ -573,29 +575,38 @@ class TemplateMatcher:
             out[s:e] = (gsort[s:e] - vs).abs_().sum(1)
         return out
 
-    def coarse_bound(self, bank: TemplateBank, parts: dict, ids: torch.Tensor) -> torch.Tensor:
+    def coarse_bound(
+        self, bank: TemplateBank, parts: dict, ids: torch.Tensor | None = None
+    ) -> torch.Tensor:
         """Block-pooled group-profile bound of the templates ``ids`` at every offset.
 
         Returns:
-            Shape ``(M, K)``, in SAD units.
+            Shape ``(M, K)``, in SAD units (``M = N`` when ``ids`` is None: all).
 
         Shape:
             ids: ``(M,)``.
         """
         kk = self.n_offsets
-        out = torch.empty(ids.numel(), kk, dtype=bank.dtype, device=ids.device)
+        m = len(bank) if ids is None else ids.numel()
+        out = torch.empty(m, kk, dtype=bank.dtype, device=bank._data.device)
         pool = parts["pool"]
+
+        def rows(s: int, e: int) -> torch.Tensor:
+            if ids is None:
+                return bank._pool[s:e]
+            return bank._pool.index_select(0, ids[s:e])
+
         if self.panoramic:  # template pooled once, view pooled at every offset
             per = max(1, CHUNK_ELEMENTS // pool.numel())
-            for s in range(0, ids.numel(), per):
-                rows = bank._pool.index_select(0, ids[s : s + per])
-                out[s : s + per] = (rows[:, None, :] - pool[None]).abs_().sum(-1)
+            for s in range(0, m, per):
+                e = min(s + per, m)
+                out[s:e] = (rows(s, e)[:, None, :] - pool[None]).abs_().sum(-1)
             return out
         tiled = pool.reshape(-1).repeat(kk)  # templates are pooled at every offset
         per = max(1, CHUNK_ELEMENTS // tiled.numel())
-        for s in range(0, ids.numel(), per):
-            rows = bank._pool.index_select(0, ids[s : s + per])
-            out[s : s + per] = (rows - tiled).abs_().view(-1, kk, pool.numel()).sum(-1)
+        for s in range(0, m, per):
+            e = min(s + per, m)
+            out[s:e] = (rows(s, e) - tiled).abs_().view(-1, kk, pool.numel()).sum(-1)
         return out
 
     # -------------------------------------------------------------------- search
@@ -667,7 +678,7 @@ class TemplateMatcher:
             seed = int(torch.argmin(tb))
         else:
             tb = None
-            cb = self.coarse_bound(bank, parts, torch.arange(n, device=dev))  # (N, K)
+            cb = self.coarse_bound(bank, parts)  # (N, K)
             seed = int(torch.argmin(cb)) // kk
         seeds = torch.tensor(sorted({seed, hint} if 0 <= hint < n else {seed}), device=dev)
         evaluate(seeds.repeat_interleave(kk), all_k.repeat(seeds.numel()))

@@ -19,13 +19,15 @@ compares them):
 * ``"separable"``: the Gaussian kernel with one variance on all axes is a product of
   three 1D kernels, so each 3D convolution is three 1D circular convolutions; each is a
   matrix product with a small circulant matrix (faster on CPU than ``conv1d``).
-* ``"crop"`` (the default): the activity is one packet and exactly zero elsewhere, so
+* ``"crop"``: the activity is one packet and exactly zero elsewhere, so
   only a box around the non-zero cells (per axis the shortest wrapped arc that holds
   them) plus a halo (excitation + inhibition reach + path-integration shift) can change.
   The step runs on that box with zero-padded (Toeplitz) 1D kernels and writes it back.
   This is exact because every cell outside the box is zero before and after the step;
   an axis whose box would not be smaller than the ring is processed whole (circular).
   Several packets far apart (after an injection) simply make the box the whole ring.
+* ``"auto"`` (the default) picks ``"crop"`` when a typical packet's box is a small part
+  of the network (large networks, batches), else ``"separable"``.
 
 Deviations from OpenRatSLAM (deliberate):
 
@@ -37,6 +39,10 @@ Deviations from OpenRatSLAM (deliberate):
   follows the algorithm notes ("except one of the last 10").
 * The packet centre is decoded with angles ``2 pi i / dim`` (OpenRatSLAM uses
   ``i + 1`` and subtracts one cell afterwards: the same value).
+
+Kept from OpenRatSLAM: the Gaussian weights use the configured "variance" as the
+standard deviation (``exp(-d^2 / (2 var^2))``), and an action is only decided when a
+view template and odometry have both arrived since the last decision.
 """
 
 from __future__ import annotations
@@ -459,21 +465,23 @@ class PoseCellNetwork(nn.Module):
 
         ``shift`` is ``(B,)`` (theta) or ``(B, T)`` (one shift per theta layer).
         """
-        a, g0, g1 = pool[0], pool[1], pool[2]
+        a, g0 = pool[0], pool[1]
         n = a.shape[axis]
         fl = np.floor(shift)
         frac = shift - fl
         shape = [1, 1, 1, 1]
         shape[axis] = n
         lead = shift.shape + (1,) * (4 - shift.ndim)
-        idx = np.remainder(np.arange(n).reshape(shape) - fl.astype(np.int64).reshape(lead), n)
+        ints = fl.astype(np.int64)
         dev = a.device
-        torch.gather(a, axis, torch.from_numpy(idx).to(dev).expand(a.shape), out=g0)
+        if (ints == ints.flat[0]).all():  # one integer shift for everything: a roll
+            g0.copy_(torch.roll(a, int(ints.flat[0]), dims=axis))
+        else:
+            idx = np.remainder(np.arange(n).reshape(shape) - ints.reshape(lead), n)
+            torch.gather(a, axis, torch.from_numpy(idx).to(dev).expand(a.shape), out=g0)
         if frac.any():
-            idx1 = torch.from_numpy(np.remainder(idx - 1, n)).to(dev)
-            torch.gather(a, axis, idx1.expand(a.shape), out=g1)
             w = torch.from_numpy(frac.reshape(lead)).to(device=dev, dtype=a.dtype)
-            torch.lerp(g0, g1, w, out=g0)
+            torch.lerp(g0, torch.roll(g0, 1, dims=axis), w, out=g0)
         pool[0], pool[1] = g0, a
 
     def _path_integrate(
@@ -546,12 +554,17 @@ class PoseCellNetwork(nn.Module):
         act.scatter_(1, flat, a)
         # the new occupancy, from the crop (every other cell is zero)
         nz = (a != 0).cpu().numpy().reshape(b, lt, ly, lx)
+        nz_t = nz.any(axis=3)
         new_occ = []
-        for axis_i, (axes, n) in enumerate(
-            zip(((2, 3), (1, 3), (1, 2)), (n_t, n_y, n_x), strict=True)
+        for axis_i, (o_crop, n) in enumerate(
+            zip(
+                (nz_t.any(axis=2), nz_t.any(axis=1), nz.any(axis=(1, 2))),
+                (n_t, n_y, n_x),
+                strict=True,
+            )
         ):
             o = np.zeros((b, n), dtype=bool)
-            np.put_along_axis(o, idx[axis_i], nz.any(axis=axes), axis=1)
+            np.put_along_axis(o, idx[axis_i], o_crop, axis=1)
             new_occ.append(o)
         self._occ = (new_occ[0], new_occ[1], new_occ[2])
         self._occ_key = (self.activity.data_ptr(), self.activity._version)

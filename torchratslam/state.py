@@ -858,7 +858,6 @@ def apply_state(state: MapState, slam: Any, *, exp_ids: np.ndarray | None = None
     pc["current_exp"] = int(state.scalars.get("pc.current_exp", state.current_exp))
     if PC_BEST in state.extra:
         pc["best"] = np.array(state.extra[PC_BEST], np.float64, copy=True)
-    pc.pop("best.none", None)
     em = experience_map_state(state)
     if "exp:em_pc" in state.extra:
         em["pc"] = np.array(state.extra["exp:em_pc"], np.float64, copy=True)

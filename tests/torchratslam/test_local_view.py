@@ -7,6 +7,8 @@ import math
 import numpy as np
 import pytest
 import torch
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from torchratslam.config import LocalViewParams, load_config
 from torchratslam.errors import ConfigError, InputError, MapFormatError
@@ -136,6 +138,31 @@ def test_match_equals_brute_force(panoramic, y, x, shift, step, n):
         lv.prune = False
         assert lv.match(torch.from_numpy(v))[:2] == want[:2]
         lv.prune = True
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    panoramic=st.booleans(),
+    y=st.integers(1, 6),
+    x=st.integers(3, 17),
+    shift=st.integers(0, 4),
+    step=st.integers(1, 5),
+    n=st.integers(1, 40),
+    seed=st.integers(0, 2**16),
+    quantised=st.booleans(),
+)
+def test_match_equals_brute_force_random_shapes(panoramic, y, x, shift, step, n, seed, quantised):
+    shift = min(shift, (x - 1) // 2)  # normal mode needs X > 2 * shift
+    rng = np.random.default_rng(seed)
+    bank = smooth_bank(rng, n, y, x)
+    if quantised:  # coarse values: many exact ties between templates and offsets
+        bank = np.round(bank * 4) / 4
+    lv = make_lv(y, x, panoramic=panoramic, shift=shift, step=step)
+    lv.add_templates(bank)
+    v = bank[rng.integers(n)] if quantised else rng.random((y, x))
+    want = brute_force(bank, v, panoramic, shift, step)
+    got = lv.match(v)
+    assert got[:2] == want[:2] and got[2] == pytest.approx(want[2], abs=1e-9)
 
 
 @pytest.mark.parametrize("panoramic", [True, False])

@@ -142,6 +142,23 @@ def test_vigilance_takes_the_best_node_that_passes():
     assert r.node == 1 and not r.is_new and m.graph.has_edge(1, 1) is False
 
 
+def test_current_vigilance_ignores_the_input_and_zero_weight_is_allowed():
+    p = MBARAMParams(
+        vigilance="current", alpha_odometry=0.0, alpha_laser_front=0.5, alpha_laser_rear=0.5
+    )
+    m = MBARAM(p)
+    x = {"laser_front": np.ones(5), "laser_rear": np.ones(5), "odometry": [0.0, 0.0, 0.0]}
+    far = {"laser_front": np.full(5, 50.0), "laser_rear": np.ones(5), "odometry": [9.0, 9, 1]}
+    m.learn(x)
+    # det(0.01 I) <= 1 as it stands: the far input is learnt by node 0 ...
+    assert m.learn(far).node == 0 and len(m) == 1
+    # ... and afterwards node 0 is "full" and never wins again
+    assert float(m.hypervolumes("laser_front")[0]) > 0.0
+    assert m.learn(x).is_new
+    # with weight 0 the odometry channel does not compete but is still checked
+    assert m.scores(x).exp().sum().item() == pytest.approx(1.0)
+
+
 @settings(max_examples=40, deadline=None)
 @given(
     seed=st.integers(0, 10_000),

@@ -70,6 +70,7 @@ def test_saved_state_continues_exactly_as_if_never_saved(tour, tmp_path):
     assert np.array_equal(a.trajectory()[25:, 2:], b.trajectory()[:, 2:])
 
 
+@pytest.mark.slow
 def test_session2_merges_with_session1_and_retraverses_without_new_experiences(
     tour, session1_map, session2
 ):
@@ -94,6 +95,7 @@ def test_session2_merges_with_session1_and_retraverses_without_new_experiences(
     assert np.isfinite(traj[:, 3:]).all() and traj[:, 2].max() < st.n_experiences
 
 
+@pytest.mark.slow
 def test_without_the_pose_cell_shift_new_experiences_appear(tour, session1_map, session2):
     _, c1 = session2
     plain, c2 = run_session2(tour, session1_map, LAP2, shift_pose_cells=False)
@@ -119,6 +121,7 @@ def test_an_incompatible_stored_map_is_refused(session1_map):
         MultiSessionRatSLAM(CONFIG.replace(pc_dim_xy=40), [session1_map])
 
 
+@pytest.mark.slow
 def test_multisession_cli_writes_the_report(tmp_path, capsys):
     from torchratslam.cli import main
 
@@ -146,6 +149,7 @@ def test_multisession_cli_writes_the_report(tmp_path, capsys):
     assert "ICP RMSE" in capsys.readouterr().out
 
 
+@pytest.mark.slow
 def test_two_stored_maps_are_merged_one_after_the_other(tour):
     """kappa = 2: session 1 split in two separately mapped halves; session 2 meets the
     first half, then the second, and ends in one connected map."""

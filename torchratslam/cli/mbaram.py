@@ -180,7 +180,12 @@ def plot_results(result: Any, session: Any, out: Path) -> None:
     laps = np.arange(1, len(per_lap) + 1)
     ax.bar(laps - 0.2, per_lap, width=0.4, label="nodes added (this run)")
     paper = PAPER["nodes_per_lap"][: len(per_lap)]
-    ax.bar(np.arange(1, len(paper) + 1) + 0.2, paper, width=0.4, label="paper, Fig. 13a")
+    ax.bar(
+        np.arange(1, len(paper) + 1) + 0.2,
+        paper,
+        width=0.4,
+        label="paper, Fig. 13a (24, then 5-6; 47 after 5)",
+    )
     ax.set_xlabel("lap")
     ax.set_ylabel("nodes added")
     ax.set_xticks(laps)
