@@ -22,7 +22,8 @@ Offsets (both modes follow OpenRatSLAM):
   compared with the template's columns ``o .. o + X - 2s - 1`` for ``o = 0, step, ...,
   <= 2s``; the mean is over ``(X - 2s) * Y`` pixels and the relative angle is 0. A view
   whose content moved right by ``k`` columns (``view[:, c] = template[:, c - k]``)
-  matches at ``o = s - k``.
+  matches at ``o = s - k``. As in OpenRatSLAM, the unshifted comparison ``o = s`` is
+  among the offsets only when ``s`` is a multiple of ``vt_step_match``.
 * panoramic mode (``vt_panoramic``): view column ``c`` is compared with template column
   ``(c + o) mod X`` for ``o = 0, step, ... < X``, the mean is over all ``X * Y``
   pixels. A view *rotated by +k columns*, ``view = torch.roll(template, -k, dims=-1)``
@@ -890,6 +891,7 @@ class _TemplateView:
             "current_id": int(self.current_id),
             "previous_id": int(self.previous_id),
             "frame_counter": int(self.frame_counter),
+            **self._extra_state(),
         }
 
     def set_state(self, state: dict) -> None:
@@ -927,6 +929,13 @@ class _TemplateView:
         self.current_id = int(state.get("current_id", -1))
         self.previous_id = int(state.get("previous_id", -1))
         self.frame_counter = int(state.get("frame_counter", 0))
+        self._set_extra_state(state)
+
+    def _extra_state(self) -> dict:
+        return {}
+
+    def _set_extra_state(self, state: dict) -> None:
+        pass
 
     def _validate_shape(self, shape: tuple[int, ...]) -> None:
         pass
@@ -969,6 +978,7 @@ class LocalView(_TemplateView):
         exact_errors: bool = False,
     ) -> None:
         super().__init__(params, dtype=dtype, device=device, prune=prune, exact_errors=exact_errors)
+        self.image_shape: tuple[int, ...] | None = None  # (H, W) of the processed frames
         self._setup(params.template_y_size, params.template_x_size)
 
     def preprocess(self, image: Any) -> torch.Tensor:
@@ -982,7 +992,24 @@ class LocalView(_TemplateView):
     def _to_template(self, observation: Any) -> torch.Tensor:
         if isinstance(observation, Frame):
             observation = observation.image
+        shape = tuple(getattr(observation, "shape", ()))[:2]
+        if self.image_shape is None:
+            template = self.preprocess(observation)
+            self.image_shape = shape  # recorded once the first image passed the checks
+            return template
+        if shape != self.image_shape:
+            raise InputError(
+                f"image of shape {shape} differs from the earlier frames' {self.image_shape}; "
+                "one local view processes one camera (use a new LocalView for another)"
+            )
         return self.preprocess(observation)
+
+    def _extra_state(self) -> dict:
+        return {"image_shape": np.asarray(self.image_shape or (), dtype=np.int64)}
+
+    def _set_extra_state(self, state: dict) -> None:
+        shape = tuple(int(v) for v in np.asarray(state.get("image_shape", ())).reshape(-1))
+        self.image_shape = shape if len(shape) == 2 else None
 
     def _validate_shape(self, shape: tuple[int, ...]) -> None:
         want = (self.params.template_y_size, self.params.template_x_size)

@@ -140,7 +140,7 @@ def test_match_equals_brute_force(panoramic, y, x, shift, step, n):
         lv.prune = True
 
 
-@settings(max_examples=40, deadline=None)
+@settings(max_examples=25, deadline=None)
 @given(
     panoramic=st.booleans(),
     y=st.integers(1, 6),
@@ -279,6 +279,23 @@ def test_brightness_change_absorbed_new_scene_learnt_same_scene_not():
     assert not again.is_new and again.template_id == 0
     assert len(lv) == 2 and lv.bank.frames.tolist() == [0, 2]
     assert lv.current_id == 0 and lv.previous_id == 1
+
+
+def test_frames_are_accepted_and_a_changed_image_size_is_an_error():
+    rng = np.random.default_rng(14)
+    p = LocalViewParams(template_x_size=16, template_y_size=4, vt_shift_match=2, vt_step_match=1)
+    img = rng.integers(0, 256, (16, 64)).astype(np.uint8)
+    lv = LocalView(p)
+    m = lv.process(Frame(index=5, t=0.5, image=img), frame_index=5)
+    assert m.is_new and lv.bank.frames.tolist() == [5] and lv.image_shape == (16, 64)
+    assert lv.process(Frame(index=6, t=0.6, image=img)).template_id == 0
+    with pytest.raises(InputError, match=r"\(16, 64\)"):
+        lv.process(rng.integers(0, 256, (16, 80)).astype(np.uint8))
+    with pytest.raises(InputError, match="None"):
+        LocalView(p).process(Frame(index=0, t=0.0, image=None))
+    restored = LocalView(p)
+    restored.set_state(lv.get_state())
+    assert restored.image_shape == (16, 64)
 
 
 def test_exact_errors_option_reports_the_true_minimum_for_novel_views():
