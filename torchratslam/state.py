@@ -871,9 +871,5 @@ def apply_state(state: MapState, slam: Any, *, exp_ids: np.ndarray | None = None
     slam.frame_index = int(state.frame_index)
     if hasattr(slam, "_last_t"):
         slam._last_t = float(state.scalars.get("slam.last_t", 0.0))
-    if exp_ids is not None and hasattr(slam, "_exp"):
-        ids = np.asarray(exp_ids, np.int64)
-        old = np.asarray(slam._exp, np.int64)
-        ok = (old >= 0) & (old < ids.size)
-        new = np.where(ok, ids[np.where(ok, old, 0)], old)
-        slam._exp[:] = [int(v) for v in new]
+    if exp_ids is not None and hasattr(slam, "remap_experiences"):
+        slam.remap_experiences(np.asarray(exp_ids, np.int64))
