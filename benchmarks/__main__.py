@@ -21,7 +21,8 @@ def machine() -> str:
                 break
     except OSError:
         pass
-    return f"{cpu}, {os.cpu_count()} cores, Python {platform.python_version()}, torch {torch.__version__}"
+    py = platform.python_version()
+    return f"{cpu}, {os.cpu_count()} cores, Python {py}, torch {torch.__version__}"
 
 
 def main() -> None:

@@ -91,11 +91,12 @@ class Params:
             )
             for name, ok, sym in checks:
                 if name in m and not ok(value, m[name]):
-                    raise ConfigError(f"parameter {f.name!r} = {value!r} is out of range: must be {sym} {m[name]}")
+                    raise ConfigError(
+                        f"parameter {f.name!r} = {value!r} is out of range: must be {sym} {m[name]}"
+                    )
             if "choices" in m and value not in m["choices"]:
-                raise ConfigError(
-                    f"parameter {f.name!r} = {value!r} is not one of {', '.join(map(str, m['choices']))}"
-                )
+                options = ", ".join(map(str, m["choices"]))
+                raise ConfigError(f"parameter {f.name!r} = {value!r} is not one of {options}")
 
     @classmethod
     def keys(cls) -> list[str]:

@@ -23,7 +23,9 @@ def _imported_roots(path: Path) -> set[str]:
 def test_graph_sources_never_import_torch_or_torchratslam():
     files = sorted((ROOT / "graph").rglob("*.py"))
     assert files, "graph package has no sources"
-    offenders = {str(f.relative_to(ROOT)): sorted(_imported_roots(f) & set(FORBIDDEN)) for f in files}
+    offenders = {
+        str(f.relative_to(ROOT)): sorted(_imported_roots(f) & set(FORBIDDEN)) for f in files
+    }
     offenders = {k: v for k, v in offenders.items() if v}
     assert not offenders, f"graph must stay torch-free: {offenders}"
 
@@ -39,7 +41,9 @@ def test_importing_every_graph_module_loads_no_torch():
         "bad = [m for m in ('torch', 'torchratslam') if m in sys.modules]\n"
         "print(','.join(bad))\n"
     )
-    out = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, check=True)
+    out = subprocess.run(
+        [sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, check=True
+    )
     assert out.stdout.strip() == "", f"importing graph pulled in: {out.stdout.strip()}"
 
 

@@ -73,7 +73,9 @@ class PoseCellParams(Params):
     vt_active_decay: float = param(1.0, "decay added when the current template is re-seen", ge=0.0)
     pc_vt_inject_energy: float = param(0.15, "energy injected by a familiar template", ge=0.0)
     pc_cell_x_size: float = param(1.0, "metres per pose cell in x and y", gt=0.0)
-    exp_delta_pc_threshold: float = param(2.0, "pose-cell distance that makes a new experience", ge=0.0)
+    exp_delta_pc_threshold: float = param(
+        2.0, "pose-cell distance that makes a new experience", ge=0.0
+    )
     pc_vt_restore: float = param(0.05, "decay relaxation per step", ge=0.0)
 
 
@@ -120,8 +122,17 @@ class VisualOdometryParams(Params):
 
 # Keys that only drive OpenRatSLAM's on-screen drawing; accepted and ignored anywhere.
 DISPLAY_KEYS = frozenset(
-    {"enable", "vt_window_width", "vt_window_height", "exp_map_size", "posecell_vis",
-     "media_path", "image_file", "pc_window_width", "pc_window_height"}
+    {
+        "enable",
+        "vt_window_width",
+        "vt_window_height",
+        "exp_map_size",
+        "posecell_vis",
+        "media_path",
+        "image_file",
+        "pc_window_width",
+        "pc_window_height",
+    }
 )
 # Top-level YAML keys that are metadata, not parameters.
 META_KEYS = frozenset({"description", "source"})
@@ -197,7 +208,9 @@ def _read_yaml(path: Path) -> dict[str, Any]:
     if data is None:
         return {}
     if not isinstance(data, dict):
-        raise ConfigError(f"{path}: expected a mapping of parameter keys, got {type(data).__name__}")
+        raise ConfigError(
+            f"{path}: expected a mapping of parameter keys, got {type(data).__name__}"
+        )
     return data
 
 
@@ -205,7 +218,9 @@ def _read_openratslam_txt(path: Path) -> dict[str, Any]:
     """Read an OpenRatSLAM ini-style config: ``[general]``, ``[ratslam]``,
     ``[visual_odometry]``, ``[draw]``; ``;`` and ``#`` comments; other sections ignored."""
     parser = configparser.ConfigParser(
-        inline_comment_prefixes=(";", "#"), comment_prefixes=(";", "#"), strict=False,
+        inline_comment_prefixes=(";", "#"),
+        comment_prefixes=(";", "#"),
+        strict=False,
         interpolation=None,
     )
     parser.optionxform = str  # keep key case
@@ -244,7 +259,9 @@ def load_config(path: str | Path | None = None, **overrides: Any) -> RatSLAMConf
         p = CONFIG_DIR / f"{p.name}.yaml"
     if not p.exists():
         shipped = sorted(q.stem for q in CONFIG_DIR.glob("*.yaml"))
-        raise InputError(f"config file {str(path)!r} not found (shipped configs: {', '.join(shipped)})")
+        raise InputError(
+            f"config file {str(path)!r} not found (shipped configs: {', '.join(shipped)})"
+        )
     flat = _read_yaml(p) if p.suffix.lower() in (".yaml", ".yml") else _read_openratslam_txt(p)
     flat.update(overrides)
     return RatSLAMConfig.from_flat(flat, source=str(p))

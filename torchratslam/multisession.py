@@ -396,18 +396,24 @@ def run_tour(
 ) -> dict[str, Any]:
     """Multisession versus single-session mapping of a simulated tour.
 
-    Runs the single-session map over ``tour.full()`` and the multisession mapping of
-    ``tour.sessions`` (each session saved and loaded by the next), then compares them.
+    Runs the single-session map over ``tour.continuous()`` (every session driven in
+    one continuous run, joined by drives along the tour's roads: the paper's single
+    mapping session), the multisession mapping of ``tour.sessions`` (each session
+    saved and loaded by the next), and, for reference, single-session maps over
+    ``tour.full()`` (the sessions concatenated with a kidnap between them) and over the
+    last session alone; then compares them.
 
     Args:
         config: the configuration.
-        tour: a :class:`torchratslam.sim.Tour` (``sessions``, ``full()``, ``name``).
+        tour: a :class:`torchratslam.sim.Tour` (``sessions``, ``continuous()``,
+            ``full()``, ``name``).
         ablation: also run the multisession mapping without the pose-cell shift.
         backends: also rerun the multisession mapping with each of these relaxation
             backends (``exp_backend``), and relax each merged graph with each of them.
         save_dir: where session maps are saved (``<dir>/multi/<session>/state``).
         progress: progress bars.
-        max_frames: frames per session at most (quick checks).
+        max_frames: frames per session at most (quick checks; the continuous and
+            concatenated runs get this many per session, the bridges included).
 
     Returns:
         ``report`` (JSON-able: the keys of ``OUT/report.json``) and ``data`` (the maps,
@@ -419,29 +425,33 @@ def run_tour(
     from torchratslam.state import state_from_slam
 
     full = tour.full()
-    gt = full.groundtruth()
-    starts = np.cumsum([0] + [len(s) for s in tour.sessions])[:-1]
-    offsets = [float(full.times[a] - s.times[0]) for a, s in zip(starts, tour.sessions)]
+    cont = tour.continuous() if hasattr(tour, "continuous") else full
+    parts = {p["name"]: p for p in getattr(cont, "info", {}).get("parts", [])}
+    if all(s.name in parts for s in tour.sessions):
+        # every session on the continuous run's clock: one ground truth for all maps
+        starts = [parts[s.name]["start"] for s in tour.sessions]
+    else:  # a single-session tour (or no roads between sessions): the concatenation
+        cont = full
+        starts = list(np.cumsum([0] + [len(s) for s in tour.sessions])[:-1])
+    gt = cont.groundtruth()
+    offsets = [float(cont.times[a] - s.times[0]) for a, s in zip(starts, tour.sessions)]
+    limit = None if max_frames is None else max_frames * len(tour.sessions)
 
     def sub(name: str) -> Path | None:
         return None if save_dir is None else Path(save_dir) / name
 
-    t0 = time.perf_counter()
-    single = RatSLAM(config, **ratslam_kwargs)
-    single.run(
-        full.frames(),
-        max_frames=None if max_frames is None else max_frames * len(tour.sessions),
-        progress=progress,
-    )
-    single_state = state_from_slam(single)
-    single_wall = time.perf_counter() - t0
-    # the last session alone, continuous (no kidnap): for the virtual tour this is the
-    # paper's single-session run (session 2 contains session 1's path)
-    last = RatSLAM(config, **ratslam_kwargs)
-    last.run(
-        _shifted(tour.sessions[-1].frames(), offsets[-1]), max_frames=max_frames, progress=progress
-    )
-    last_state = state_from_slam(last)
+    def single_run(frames: Any, n: int | None) -> tuple[MapState, float]:
+        t0 = time.perf_counter()
+        slam = RatSLAM(config, **ratslam_kwargs)
+        slam.run(frames, max_frames=n, progress=progress)
+        return state_from_slam(slam), time.perf_counter() - t0
+
+    # the paper's single mapping session: one continuous run through every session
+    single_state, single_wall = single_run(cont.frames(), limit)
+    # the sessions concatenated, kidnapped between them (its own clock and ground truth)
+    concat_state, concat_wall = single_run(full.frames(), limit)
+    # the last session alone, continuous (for the virtual tour it contains session 1's path)
+    last_state, _ = single_run(_shifted(tour.sessions[-1].frames(), offsets[-1]), max_frames)
 
     multi = run_sessions(
         config,
@@ -453,8 +463,13 @@ def run_tour(
         **ratslam_kwargs,
     )
     final = multi["maps"][-1]
-    s_xy, m_xy = single_state.exp_pose[:, :2], final.exp_pose[:, :2]
-    ic = icp(m_xy, s_xy) if len(s_xy) and len(m_xy) else None
+    m_xy = final.exp_pose[:, :2]
+
+    def icp_to(other: MapState) -> Any:
+        o_xy = other.exp_pose[:, :2]
+        return icp(m_xy, o_xy) if len(o_xy) and len(m_xy) else None
+
+    ic, ic_concat, ic_last = icp_to(single_state), icp_to(concat_state), icp_to(last_state)
     extent = float(np.linalg.norm(np.ptp(gt[:, 1:3], axis=0)))
 
     def block(run: dict[str, Any]) -> dict[str, Any]:
@@ -474,25 +489,32 @@ def run_tour(
         )
         return out
 
+    def rel(n: int, ref: int) -> float | None:
+        return (n - ref) / ref if ref else None
+
     report: dict[str, Any] = {
         "tour": getattr(tour, "name", "tour"),
-        "frames": len(full),
+        "frames": int(sum(len(s) for s in tour.sessions)),
+        "frames_continuous": len(cont),
         "sessions": [s.name for s in tour.sessions],
+        "single_kind": "continuous" if cont is not full else "concatenated",
         "single": {
             **_map_metrics(single_state, gt),
             "graph_error": _graph_error(single_state, config),
             "wall_s": single_wall,
         },
+        "single_concatenated": {
+            **_map_metrics(concat_state, full.groundtruth()),
+            "graph_error": _graph_error(concat_state, config),
+            "wall_s": concat_wall,
+        },
+        "single_last_session": _map_metrics(last_state, gt),
         "multi": block(multi),
         "icp_rmse": None if ic is None else float(ic.rmse),
         "icp_rmse_relative": None if ic is None else float(ic.rmse / max(extent, 1e-12)),
+        "icp_rmse_concatenated": None if ic_concat is None else float(ic_concat.rmse),
+        "icp_rmse_last_session": None if ic_last is None else float(ic_last.rmse),
         "tour_extent_m": extent,
-        "single_last_session": _map_metrics(last_state, gt),
-        "icp_rmse_last_session": (
-            float(icp(m_xy, last_state.exp_pose[:, :2]).rmse)
-            if last_state.n_experiences and len(m_xy)
-            else None
-        ),
         "paper_icp_rmse": PAPER_ICP_RMSE.get(getattr(tour, "name", ""), None),
         "merges": [
             {
@@ -506,22 +528,23 @@ def run_tour(
             for m in multi["merges"]
         ],
     }
-    n_s = report["single"]["experiences"]
-    report["experiences_difference_relative"] = (
-        (report["multi"]["experiences"] - n_s) / n_s if n_s else None
+    n_m = report["multi"]["experiences"]
+    report["experiences_difference_relative"] = rel(n_m, report["single"]["experiences"])
+    report["experiences_difference_relative_concatenated"] = rel(
+        n_m, report["single_concatenated"]["experiences"]
     )
-    n_l = report["single_last_session"]["experiences"]
-    report["experiences_difference_relative_last_session"] = (
-        (report["multi"]["experiences"] - n_l) / n_l if n_l else None
+    report["experiences_difference_relative_last_session"] = rel(
+        n_m, report["single_last_session"]["experiences"]
     )
     data: dict[str, Any] = {
         "single": single_state,
+        "single_concatenated": concat_state,
         "single_last_session": last_state,
         "multi": multi,
         "groundtruth": gt,
         "offsets": offsets,
         "icp": ic,
-        "session_starts": [float(full.times[a]) for a in starts],
+        "session_starts": [float(cont.times[a]) for a in starts],
         "world": getattr(tour, "world", None),
     }
     if ablation:

@@ -30,7 +30,9 @@ class Registry:
 
         def add(target: T) -> T:
             if name in self._items and not overwrite and self._items[name] is not target:
-                raise ConfigError(f"{self.kind} {name!r} is already registered (pass overwrite=True)")
+                raise ConfigError(
+                    f"{self.kind} {name!r} is already registered (pass overwrite=True)"
+                )
             self._items[name] = target
             return target
 

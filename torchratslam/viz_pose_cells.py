@@ -118,7 +118,7 @@ def plot_activity(
     ax.set(
         xlabel="x (cells)",
         ylabel="y (cells)",
-        title="activity over theta",
+        title="x-y activity (summed over theta)",
         xlim=(-0.5, n_x - 0.5),
         ylim=(-0.5, n_y - 0.5),
     )
@@ -127,7 +127,7 @@ def plot_activity(
     ax.set(
         xlabel="theta (cells)",
         ylabel="activity",
-        title="activity over x, y",
+        title="theta activity (summed over x, y)",
         xlim=(-0.5, n_th - 0.5),
     )
     if centres is not None:

@@ -64,20 +64,20 @@ class _NoiseModels:
         return model
 
 
-def _between_factors(pg: PoseGraph, rows: range | np.ndarray, models: _NoiseModels) -> list:
-    edges = pg.edges.tolist()
-    meas = pg.measurements.tolist()
+def _between_factors(pg: PoseGraph, rows: range, models: _NoiseModels) -> list:
+    edges = pg.edges[rows.start : rows.stop].tolist()
+    meas = pg.measurements[rows.start : rows.stop].tolist()
     return [
-        gtsam.BetweenFactorPose2(edges[i][0], edges[i][1], gtsam.Pose2(*meas[i]), models(i))
-        for i in rows
+        gtsam.BetweenFactorPose2(a, b, gtsam.Pose2(*m), models(i))
+        for i, (a, b), m in zip(rows, edges, meas)
     ]
 
 
-def _values(poses: np.ndarray, rows: range | np.ndarray | None = None) -> gtsam.Values:
+def _values(poses: np.ndarray, rows: range | None = None) -> gtsam.Values:
     v = gtsam.Values()
-    plist = poses.tolist()
-    for i in range(len(plist)) if rows is None else rows:
-        v.insert(int(i), gtsam.Pose2(*plist[i]))
+    rows = range(len(poses)) if rows is None else rows
+    for i, p in zip(rows, poses[rows.start : rows.stop].tolist()):
+        v.insert(i, gtsam.Pose2(*p))
     return v
 
 
@@ -183,7 +183,10 @@ class ISAM2Backend:
     update, plus ``extra_updates`` more; a call with an unchanged graph runs one more
     update (another relinearisation step). The first call, and any other change (edited
     or deleted links, reordered nodes, as after a map merge or link averaging), rebuilds
-    from ``pg.poses`` and iterates until converged.
+    from ``pg.poses``: a batch LM solve whose optimum becomes iSAM2's linearisation point.
+    The default ``relinearize_threshold`` (0.01, as gtsam's City10000 example) keeps
+    online updates cheap and ends within ~3e-5 (relative) of LM's error on city10000
+    slices; 0.001 reaches LM to 1e-6 at about twice the cost per pose.
     When two components with their own priors get linked, it rebuilds too, so a map
     never keeps a stale prior.
 
@@ -192,8 +195,6 @@ class ISAM2Backend:
         relinearize_threshold: iSAM2 relinearisation threshold (per variable).
         relinearize_skip: relinearise every this many updates.
         extra_updates: additional ``update()`` calls per relax.
-        rebuild_iterations: after a (re)build from scratch, at most this many more
-            updates, until no pose moves by more than 1e-9 (a batch solve).
     """
 
     name = "isam2"
@@ -202,16 +203,15 @@ class ISAM2Backend:
     def __init__(
         self,
         sigmas: Sequence[float] | None = None,
-        relinearize_threshold: float = 0.001,
+        relinearize_threshold: float = 0.01,
         relinearize_skip: int = 1,
         extra_updates: int = 0,
-        rebuild_iterations: int = 50,
     ) -> None:
         self.sigmas = _sigmas(sigmas)
         self.relinearize_threshold = float(relinearize_threshold)
         self.relinearize_skip = int(relinearize_skip)
         self.extra_updates = int(extra_updates)
-        self.rebuild_iterations = int(rebuild_iterations)
+        self._lm = GtsamBackend(self.sigmas).params
         self.rebuilds = 0
         self.reset()
 
@@ -283,18 +283,14 @@ class ISAM2Backend:
             graph.add(gtsam.PriorFactorPose2(r, gtsam.Pose2(*pg.poses[r]), prior))
         values = _values(pg.poses, range(self._n, pg.num_poses))
         try:
+            if not incremental and pg.num_edges:
+                # a (re)build starts from scratch: solve it in batch and hand iSAM2 the
+                # optimum as linearisation point, so it starts exactly where LM ends
+                values = gtsam.LevenbergMarquardtOptimizer(graph, values, self._lm).optimize()
             self._isam.update(graph, values)
             for _ in range(self.extra_updates):
                 self._isam.update()
             out = _poses_from(self._isam.calculateEstimate(), pg.num_poses)
-            if not incremental:  # a (re)build starts far away: iterate like a batch solver
-                for _ in range(self.rebuild_iterations):
-                    self._isam.update()
-                    new = _poses_from(self._isam.calculateEstimate(), pg.num_poses)
-                    step = np.abs(new - out).max()
-                    out = new
-                    if step < 1e-9:
-                        break
         except RuntimeError as exc:
             self.reset()
             raise GraphError(f"iSAM2 update failed: {exc}") from None

@@ -13,8 +13,13 @@ SHIPPED = sorted(CONFIG_DIR.glob("*.yaml"))
 def test_all_published_parameter_sets_are_shipped():
     names = {p.stem for p in SHIPPED}
     assert names >= {
-        "virtual_tour", "lab_tour", "irat", "new_college",
-        "irat_openratslam", "stlucia", "new_college_openratslam",
+        "virtual_tour",
+        "lab_tour",
+        "irat",
+        "new_college",
+        "irat_openratslam",
+        "stlucia",
+        "new_college_openratslam",
     }
 
 
@@ -88,7 +93,9 @@ def test_openratslam_txt_config_loads(tmp_path: Path):
 
 def test_txt_equals_yaml_for_the_same_values(tmp_path: Path):
     p = tmp_path / "c.txt"
-    p.write_text("[ratslam]\n" + "\n".join(f"{k}={v}" for k, v in load_config("irat").to_flat().items()))
+    p.write_text(
+        "[ratslam]\n" + "\n".join(f"{k}={v}" for k, v in load_config("irat").to_flat().items())
+    )
     assert load_config(p) == load_config("irat")
 
 

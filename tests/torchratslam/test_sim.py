@@ -334,6 +334,158 @@ def test_full_concatenates_sessions_with_a_kidnap():
     assert np.allclose(full.dead_reckoning()[n1], full.poses[n1])
 
 
+def _crosses(p, q, segments):
+    """Brute force: does the straight move p -> q cross (or touch) any wall segment?"""
+    for x0, y0, x1, y1 in segments:
+        a, b = np.array([x0, y0]), np.array([x1, y1])
+
+        def side(u, v, w):
+            return (v[0] - u[0]) * (w[1] - u[1]) - (v[1] - u[1]) * (w[0] - u[0])
+
+        if side(p, q, a) * side(p, q, b) <= 0 and side(a, b, p) * side(a, b, q) <= 0:
+            return True
+    return False
+
+
+def _seg_dist(points, segments):
+    a, b = segments[:, :2], segments[:, 2:]
+    ab = b - a
+    t = ((points[:, None] - a[None]) * ab[None]).sum(-1) / (ab * ab).sum(-1)[None]
+    t = np.clip(t, 0, 1)
+    return np.linalg.norm(points[:, None] - (a[None] + t[..., None] * ab[None]), axis=-1).min(1)
+
+
+@pytest.mark.parametrize("name", ["virtual_tour", "lab_tour", "irat_like"])
+def test_continuous_traversal_drives_the_roads_between_sessions(name):
+    t = get_tour(name, exact_odometry=True)
+    c = t.continuous()
+    ss = t.sessions
+    parts = c.info["parts"]
+    assert [p["name"] for p in parts][::2] == [s.name for s in ss]
+    assert parts[0]["start"] == 0 and parts[-1]["stop"] == len(c)
+    assert all(a["stop"] == b["start"] for a, b in zip(parts, parts[1:]))
+    # it contains every session's frames unchanged: poses, noise keys, hence images
+    by_name = {p["name"]: p for p in parts}
+    for s in ss:
+        p = by_name[s.name]
+        assert np.array_equal(c.poses[p["start"] : p["stop"]], s.poses)
+        assert np.array_equal(c.keys[p["start"] : p["stop"]], s.keys)
+    k = by_name[ss[-1].name]["start"] + 3
+    assert np.array_equal(c.render(k), ss[-1].render(3))
+    # connected: no step longer than the sessions' own (speed / hz), never a jump, and
+    # no turn much faster than the sessions' own
+    ds = max(np.hypot(*np.diff(s.poses[:, :2], axis=0).T).max() for s in ss)
+    turn = max(np.abs(wrap(np.diff(s.poses[:, 2]))).max() for s in ss)
+    steps = np.hypot(*np.diff(c.poses[:, :2], axis=0).T)
+    assert steps.max() <= 1.05 * ds
+    assert np.abs(wrap(np.diff(c.poses[:, 2]))).max() <= 1.5 * turn + 1e-9
+    moving = steps > 1e-12  # frames that translate do so along their heading
+    d = np.diff(c.poses[:, :2], axis=0)[moving]
+    assert np.allclose(wrap(np.arctan2(d[:, 1], d[:, 0]) - c.poses[1:, 2][moving]), 0, atol=1e-9)
+    # one clock
+    assert np.allclose(np.diff(c.times), c.odometry[1, 2])
+    # the bridges stay on the roads: clear of every wall, never through one
+    walls = t.world.segments
+    for p in parts[1::2]:
+        pts = c.poses[p["start"] - 1 : p["stop"] + 1, :2]
+        assert _seg_dist(pts, walls).min() > 0.05 * (0.1 if name == "irat_like" else 1.0)
+        assert not any(_crosses(a, b, walls) for a, b in zip(pts[:-1], pts[1:]))
+    # odometry (noise off) integrates back to the ground truth: brute-force loop
+    x, y, th = c.poses[0]
+    for k in range(1, len(c)):
+        vt, vr, dt = c.odometry[k]
+        th += vr * dt
+        x += vt * dt * math.cos(th)
+        y += vt * dt * math.sin(th)
+        assert abs(wrap(th - c.poses[k, 2])) < 1e-9
+        assert math.hypot(x - c.poses[k, 0], y - c.poses[k, 1]) < 1e-9
+    assert t.session("continuous").poses.shape == c.poses.shape
+
+
+def test_continuous_virtual_tour_drives_the_unmapped_quarter():
+    t = get_tour("virtual_tour")
+    s1, s2 = t.sessions
+    c = t.continuous()
+    bridge = c.poses[len(s1) : len(c) - len(s2)]
+    # the bridge is the stretch of the ellipse between session 1's end and session 2's
+    # start, at the sessions' own spacing
+    ell = t.routes["ellipse"]
+    near = _path_dist(bridge, np.c_[ell.at(np.linspace(0, ell.length, 20000)), np.zeros(20000)])
+    assert near.max() < 0.02
+    gap = np.linalg.norm(s2.poses[0, :2] - s1.poses[-1, :2])
+    ds = np.hypot(*np.diff(s1.poses[:2, :2], axis=0).T)[0]
+    assert gap > 5 * ds and abs(len(bridge) + 1 - gap / ds) < 0.05 * gap / ds + 1
+    # session frames keep their own noisy odometry; the first frame of session 2 gets
+    # that of the step reaching it
+    assert np.array_equal(c.odometry[1 : len(s1)], s1.odometry[1:])
+    assert np.array_equal(c.odometry[len(c) - len(s2) + 1 :], s2.odometry[1:])
+    assert c.odometry[len(c) - len(s2), 0] > 0 and np.all(c.odometry[1:, 2] > 0)
+    assert c.frame(len(s1) + 2).meta["session"] == "bridge1"
+    assert len(open_sim("sim:virtual_tour/continuous")) == len(c)
+
+
+def test_single_session_tours_are_their_own_continuous_run():
+    t = get_tour("loop", laps=0.1)
+    assert t.continuous() is t.sessions[0]
+
+
+# ---------------------------------------------------------------------------- textures
+
+
+def test_smooth_textures_change_slowly_along_the_wall():
+    from torchratslam.sim.world import make_texture
+
+    def roughness(style):
+        rng = np.random.default_rng(5)
+        strips = [make_texture(rng, 30.0, style=style) for _ in range(20)]
+        assert all(s.shape == (32, 480) and s.min() >= 0 and s.max() <= 1 for s in strips)
+        return np.mean([np.abs(np.diff(s, axis=1)).mean() for s in strips])
+
+    assert roughness("smooth") < 0.25 * roughness("default")
+    a = make_texture(np.random.default_rng(1), 12.0, style="smooth", scale=3.0)
+    b = make_texture(np.random.default_rng(1), 12.0, style="smooth", scale=3.0)
+    assert np.array_equal(a, b)
+    with pytest.raises(InputError, match="style"):
+        make_texture(np.random.default_rng(1), 2.0, style="fuzzy")
+
+
+def test_virtual_tour_views_match_one_column_off_and_places_differ():
+    """With the paper's Table 1 local view (128x32 templates, vt_shift_match 5,
+    vt_step_match 2: offsets -5, -3, ..., 5 around the centre, never 0), a view seen
+    again is compared one template column off; that costs well below the threshold,
+    while places 4 m or more apart differ by more than it."""
+    import torch
+
+    from torchratslam.config import load_config
+    from torchratslam.local_view import preprocess
+
+    lp = load_config("virtual_tour").local_view
+    thr, shift, step = lp.vt_match_threshold, lp.vt_shift_match, lp.vt_step_match
+    assert (thr, shift, step, lp.template_x_size) == (0.05, 5, 2, 128)
+    s = get_tour("virtual_tour").sessions[1]
+    n = 150  # one lap
+    ks = np.arange(0, n, 3)
+    tpl = np.stack([preprocess(s.render(int(k)), lp, dtype=torch.float64).numpy() for k in ks])
+    width = lp.template_x_size - 2 * shift
+
+    def err(view, t):  # brute force over the compared offsets
+        return min(
+            np.abs(view[:, shift : shift + width] - t[:, o : o + width]).mean()
+            for o in range(0, 2 * shift + 1, step)
+        )
+
+    same = np.array([err(t, t) for t in tpl])
+    assert same.max() < 0.6 * thr and same.mean() < 0.5 * thr
+    far = []
+    for i in range(len(ks)):
+        for j in range(len(ks)):
+            gap = abs(int(ks[i]) - int(ks[j]))
+            if min(gap, n - gap) >= 10:
+                far.append(err(tpl[i], tpl[j]))
+    far = np.array(far)
+    assert far.min() > thr and np.median(far) > 1.5 * thr
+
+
 # ---------------------------------------------------------------------------- options
 
 

@@ -57,6 +57,8 @@ from torchratslam.sim.world import World, WorldBuilder, make_texture
 
 __all__ = ["TOURS", "Obstacles", "Session", "Tour", "get_tour"]
 
+Point = tuple[float, float]
+
 
 @dataclass(frozen=True)
 class Obstacles:
@@ -67,11 +69,13 @@ class Obstacles:
         centres: ``(T, K, 2)`` box centres per frame (far away = absent).
         world: the world with the boxes' faces appended (textures included); its last
             ``4K`` segments are replaced per frame.
+        n_moved: the first ``n_moved`` boxes are moved obstacles, the rest pedestrians.
     """
 
     shape: np.ndarray
     centres: np.ndarray
     world: World
+    n_moved: int = 0
 
     def world_at(self, k: int) -> World:
         n = len(self.shape)
@@ -175,7 +179,11 @@ class Session:
             scans=self.scans(k),
             meta={
                 "tour": self.tour,
-                "session": f"session{self.keys[k, 1]}",
+                "session": (
+                    f"session{self.keys[k, 1]}"
+                    if self.keys[k, 1] < _BRIDGE_KEY
+                    else f"bridge{self.keys[k, 1] - _BRIDGE_KEY}"
+                ),
                 "lap": int(self.laps[k]),
             },
         )
@@ -232,6 +240,10 @@ class Session:
         return np.stack([self.render(k) for k in range(start, stop)])
 
 
+_BRIDGE_KEY = 1000
+"""Noise keys of bridge frames use session number ``_BRIDGE_KEY + i`` (bridge i)."""
+
+
 @dataclass
 class Tour:
     """A world and the sessions recorded in it.
@@ -243,6 +255,11 @@ class Tour:
         routes: named routes (for plots).
         description: one line on what it reproduces.
         options: the options it was built with (seed included).
+        bridges: per gap between consecutive sessions, the ``(M, 3)`` ground-truth poses
+            of the drive along the tour's roads from where one session ends to where the
+            next begins (used by :meth:`continuous`).
+        noise: the odometry error model (None = exact).
+        seed: the tour's seed.
     """
 
     name: str
@@ -251,6 +268,9 @@ class Tour:
     routes: dict[str, Route] = field(default_factory=dict)
     description: str = ""
     options: dict = field(default_factory=dict)
+    bridges: list[np.ndarray] = field(default_factory=list)
+    noise: OdometryNoise | None = None
+    seed: int = 0
 
     def session(self, key: int | str) -> Session:
         """A session by 1-based number or name ("session2")."""
@@ -260,8 +280,12 @@ class Tour:
                 return self.sessions[names.index(key)]
             if key == "full":
                 return self.full()
+            if key == "continuous":
+                return self.continuous()
             raise InputError(
-                unknown_name_message(f"session of tour {self.name!r}", key, [*names, "full"])
+                unknown_name_message(
+                    f"session of tour {self.name!r}", key, [*names, "full", "continuous"]
+                )
             )
         if not 1 <= key <= len(self.sessions):
             raise InputError(f"tour {self.name!r} has sessions 1..{len(self.sessions)}, not {key}")
@@ -296,6 +320,90 @@ class Tour:
             keys=np.concatenate([s.keys for s in ss]),
             obstacles=obst,
             info=ss[0].info,
+        )
+
+    def continuous(self) -> Session:
+        """All sessions driven in one continuous run, joined by drives along the roads.
+
+        The robot drives session 1, then along the tour's own routes (:attr:`bridges`)
+        from where it ended to where session 2 begins, then session 2, and so on: the
+        single mapping session the multisession paper compares with ("the robot
+        continuously moves through the environment"). Bridge frames are ordinary
+        frames with odometry; a session's frames keep their poses, noise keys and
+        odometry (its first frame gets the odometry of the step that reaches it). One
+        clock (``times = k * dt``); ``info["parts"]`` lists every session and bridge as
+        ``{"name", "start", "stop"}`` frame ranges. Moved obstacles keep the previous
+        session's last layout on a bridge; pedestrians are absent there.
+
+        Returns:
+            The continuous session (named "continuous"); the only session of a
+            single-session tour.
+
+        Raises:
+            InputError: the tour was built without bridges between its sessions.
+        """
+        ss = self.sessions
+        if len(ss) == 1:
+            return ss[0]
+        if len(self.bridges) != len(ss) - 1:
+            raise InputError(
+                f"tour {self.name!r} has no roads between its sessions; use full() instead"
+            )
+        dts = [float(np.median(s.odometry[1:, 2])) for s in ss if len(s) > 1]
+        dt = dts[0] if dts else 1.0
+        poses, keys, laps, gain, centres, parts, own = [], [], [], [], [], [], []
+        n = 0
+        for i, sess in enumerate(ss):
+            if i > 0:
+                br = self.bridges[i - 1]
+                m = len(br)
+                poses.append(br)
+                keys.append(
+                    np.column_stack(
+                        [np.full(m, self.seed), np.full(m, _BRIDGE_KEY + i), np.arange(m)]
+                    ).astype(np.int64)
+                )
+                laps.append(np.full(m, ss[i - 1].laps[-1]))
+                gain.append(np.full(m, ss[i - 1].gain[-1]))
+                if sess.obstacles is not None:
+                    o = ss[i - 1].obstacles
+                    c = np.repeat(o.centres[-1:], m, axis=0)
+                    c[:, o.n_moved :] = 1e4  # no pedestrians on a bridge
+                    centres.append(c)
+                parts.append({"name": f"bridge{i}", "start": n, "stop": n + m})
+                n += m
+            poses.append(sess.poses)
+            keys.append(sess.keys)
+            laps.append(sess.laps)
+            gain.append(sess.gain)
+            if sess.obstacles is not None:
+                centres.append(sess.obstacles.centres)
+            parts.append({"name": sess.name, "start": n, "stop": n + len(sess)})
+            own.append((n, sess))
+            n += len(sess)
+        all_poses = np.concatenate(poses)
+        rng = np.random.default_rng([self.seed, 2000])
+        odo = odometry_from_poses(all_poses, dt, self.noise, rng)
+        for a, sess in own:  # a session's own odometry (same noise as when run alone)
+            odo[a + 1 : a + len(sess)] = sess.odometry[1:]
+        obst = None
+        if ss[0].obstacles is not None:
+            obst = replace(ss[0].obstacles, centres=np.concatenate(centres))
+        return Session(
+            name="continuous",
+            tour=self.name,
+            world=self.world,
+            poses=all_poses,
+            times=np.arange(n) * dt,
+            odometry=odo,
+            camera=ss[0].camera,
+            lasers=ss[0].lasers,
+            laps=np.concatenate(laps),
+            gain=np.concatenate(gain),
+            pixel_noise=ss[0].pixel_noise,
+            keys=np.concatenate(keys),
+            obstacles=obst,
+            info={**ss[0].info, "parts": parts},
         )
 
     def plot(self, ax: Any = None, *, legend: bool = True) -> Any:
@@ -437,6 +545,10 @@ class _Build:
     obstacle_height: float = 1.8
     description: str = ""
     scale: float = 1.0
+    # per gap between sessions i and i+1: legs (route, from, to) driven forward along
+    # the route; None = the previous session's end / the next session's start
+    bridges: list[list[tuple[Route, Point | None, Point | None]]] = field(default_factory=list)
+    clearance: float = 0.1
 
 
 def _assemble(name: str, b: _Build, o: _Opts, seed: int, options: dict) -> Tour:
@@ -528,7 +640,7 @@ def _assemble(name: str, b: _Build, o: _Opts, seed: int, options: dict) -> Tour:
                 close = np.linalg.norm(ped - poses[:, None, :2], axis=-1) < 0.45 * b.scale
                 ped[close] = 1e4
                 centres[:, n_moved:] = ped
-            obstacles = Obstacles(shape=shape, centres=centres, world=obst_world)
+            obstacles = Obstacles(shape=shape, centres=centres, world=obst_world, n_moved=n_moved)
         t_global += n * dt
         sessions.append(
             Session(
@@ -550,6 +662,19 @@ def _assemble(name: str, b: _Build, o: _Opts, seed: int, options: dict) -> Tour:
                 info={"seed": seed, "options": dict(options)},
             )
         )
+    bridges = []
+    if b.bridges:
+        max_turn = max(
+            float(np.abs(_wrap(np.diff(ses.poses[:, 2]))).max(initial=0.0)) for ses in sessions
+        )
+        max_turn = max(1.5 * max_turn, 0.05)  # never turns much faster than the sessions
+        for i, legs in enumerate(b.bridges):
+            prev, nxt = sessions[i], sessions[i + 1]
+            path = _legs_path(legs, prev.poses[-1, :2], nxt.poses[0, :2], b.plan[i][4])
+            _check_clear(b.world, Route(path, closed=False), b.clearance)
+            bridges.append(
+                _bridge_poses(prev.poses[-1], nxt.poses[0], path, b.plan[i][4], max_turn)
+            )
     return Tour(
         name=name,
         world=b.world,
@@ -557,7 +682,94 @@ def _assemble(name: str, b: _Build, o: _Opts, seed: int, options: dict) -> Tour:
         routes=b.routes,
         description=b.description,
         options={"seed": seed, **options},
+        bridges=bridges,
+        noise=b.noise,
+        seed=seed,
     )
+
+
+def _wrap(a: np.ndarray) -> np.ndarray:
+    return (np.asarray(a) + np.pi) % (2 * np.pi) - np.pi
+
+
+def _legs_path(
+    legs: list[tuple[Route, Point | None, Point | None]],
+    start: np.ndarray,
+    end: np.ndarray,
+    ds: float,
+) -> np.ndarray:
+    """``(P, 2)`` dense polyline along the legs' routes from ``start`` to ``end``."""
+    pts = []
+    for route, a, c in legs:
+        sa = _arc_of(route, tuple(start) if a is None else a)
+        sb = _arc_of(route, tuple(end) if c is None else c)
+        if route.closed and sb <= sa + 1e-9:
+            sb += route.length
+        if sb < sa:
+            raise AssertionError(f"bridge leg runs backwards along its route ({sa} -> {sb})")
+        n = max(2, math.ceil((sb - sa) / (ds / 20)) + 1)
+        pts.append(route.at(np.linspace(sa, sb, n)))
+    path = np.concatenate(pts)
+    path[0], path[-1] = start, end
+    return path
+
+
+def _bridge_poses(
+    end: np.ndarray, start: np.ndarray, path: np.ndarray, ds: float, max_turn: float
+) -> np.ndarray:
+    """Poses driving from one session's last pose to the next one's first, along ``path``.
+
+    Steps of at most ``ds`` (equal spacing, at most 5 % longer when the length is not a
+    multiple), headings along the direction of travel, so the odometry integrates back
+    exactly; where the direction changes by more than ``max_turn`` in one frame (a
+    U-turn), the robot first turns on the spot in steps of at most ``max_turn``. The
+    last stretch arrives straight along the next session's first heading: the bridge
+    ends at ``start - ds * (cos th0, sin th0)``, so the next session's first frame is one
+    ordinary step.
+
+    Shape:
+        end, start: ``(3,)``; path: ``(P, 2)`` from ``end``'s to ``start``'s position ->
+        ``(M, 3)`` (neither end included).
+    """
+    th0 = float(start[2])
+    approach = start[:2] - ds * np.array([math.cos(th0), math.sin(th0)])
+    seg = np.hypot(*np.diff(path, axis=0).T)
+    s = np.concatenate([[0.0], np.cumsum(seg)])
+    cut = max(float(s[-1]) - ds, 0.0)
+    k = int(np.searchsorted(s, cut, side="right"))
+    head = path[:k]
+    cut_pt = np.array(
+        [np.interp(cut, s, path[:, 0]), np.interp(cut, s, path[:, 1])], dtype=np.float64
+    )
+    way = np.vstack([head, cut_pt, approach])
+    keep = np.r_[True, np.hypot(*np.diff(way, axis=0).T) > 1e-12]
+    way = way[keep]
+    ws = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(way, axis=0).T))])
+    out: list[tuple[float, float, float]] = []
+    x, y, th = (float(v) for v in end)
+
+    def turn_to(target: float) -> None:
+        nonlocal th
+        dth = float(_wrap(target - th))
+        n_rot = math.ceil(abs(dth) / max_turn - 1e-9) - 1
+        for j in range(1, n_rot + 1):
+            out.append((x, y, th + dth * j / (n_rot + 1)))
+        th = th + dth * n_rot / (n_rot + 1) if n_rot > 0 else th
+
+    if ws[-1] > 1e-12:
+        n = max(1, math.ceil(ws[-1] / ds - 0.05))
+        u = ws[-1] * np.arange(1, n + 1) / n
+        px, py = np.interp(u, ws, way[:, 0]), np.interp(u, ws, way[:, 1])
+        px[-1], py[-1] = approach
+        for nx, ny in zip(px, py):
+            h = math.atan2(ny - y, nx - x)
+            turn_to(h)
+            x, y, th = float(nx), float(ny), h
+            out.append((x, y, th))
+    turn_to(th0)  # the next session's first frame makes the last turn
+    poses = np.array(out, np.float64).reshape(-1, 3)
+    poses[:, 2] = _wrap(poses[:, 2])
+    return poses
 
 
 def _place_boxes(g: np.random.Generator, b: _Build, n: int, path_xy: np.ndarray) -> np.ndarray:
@@ -599,8 +811,11 @@ def virtual_tour(
     o = opts or _Opts()
     _positive(frames_per_lap=frames_per_lap - 3, hz=hz)
     route = Route.ellipse(12.0, 7.0, start_deg=-90.0)
-    wb = WorldBuilder(seed=seed, wall_height=5.0)
-    wb.polyline([(-18, -13), (18, -13), (18, 13), (-18, 13)])
+    # smooth textures (the paper's virtual world has smooth imagery): turning by one
+    # template column (2.8 degrees) changes a view far less than vt_match_threshold, so
+    # the published vt_step_match = 2 works; the far hall walls get 3x wider features
+    wb = WorldBuilder(seed=seed, wall_height=5.0, style="smooth")
+    wb.polyline([(-18, -13), (18, -13), (18, 13), (-18, 13)], scale=3.0)
     wb.box(0.0, 0.0, 10.0, 4.0, height=3.0)
     for cx, cy, w, h in (
         (-7.5, 0.0, 1.0, 1.0),
@@ -636,6 +851,9 @@ def virtual_tour(
         main_route=route,
         obstacle_offset=2.5,
         description="multisession Fig. 5: ellipse, 3/4 lap, then 2.9 laps from an unmapped point",
+        # continuous run: on along the ellipse through the unmapped quarter to session 2
+        bridges=[[(route, None, None)]],
+        clearance=1.5,
     )
 
 
@@ -689,6 +907,10 @@ def lab_tour(
         pedestrian_offset=0.6,
         obstacle_height=1.0,
         description="multisession Fig. 6: two CCW laps of the small rectangle, 1.9 of the large",
+        # continuous run: on round the small rectangle to its left side (shared with the
+        # large one, same direction), then down the large one to session 2's start
+        bridges=[[(small, None, (0.0, 6.0)), (large, (0.0, 6.0), None)]],
+        clearance=0.8,
     )
 
 
@@ -757,6 +979,16 @@ def irat_like(
     routes["session5"] = fifth
     for rt in routes.values():
         _check_clear(world, rt, 0.1)
+    # continuous run: sessions 1-4 end where the next begins along the outer loop's
+    # straight roads; after session 4 the robot drives down the left road, turns into the
+    # spur, drives out to session 5's start and turns on the spot
+    into_spur = Route.polygon(
+        [(0.0, gy * k + 4 * r), (0.0, gy * k), (-(half + spur - 1.5) * k, gy * k)],
+        radius=r,
+        closed=False,
+    )
+    bridges = [[(outer, None, None)] for _ in range(3)]
+    bridges.append([(outer, None, (0.0, gy * k + 4 * r)), (into_spur, (0.0, gy * k + 4 * r), None)])
     ds = speed / hz
     plan = []
     starts = [
@@ -792,6 +1024,8 @@ def irat_like(
         obstacle_height=0.15,
         scale=k,
         description="multisession Fig. 7: four inner loops, then the outer loop joining them",
+        bridges=bridges,
+        clearance=0.1,
     )
 
 
