@@ -5,7 +5,7 @@
    Section 4.1): ``torchratslam multisession --tour sim:virtual_tour --ablation
    --backends alpha,gtsam``, writing the Fig. 9-style maps, the ICP overlay, the
    ablation map and ``report.json`` / ``report.md`` (the metrics table) under
-   ``DIR/multisession/``. A few minutes on one core.
+   ``DIR/multisession/``. About half a minute on one core.
 """
 
 from __future__ import annotations

@@ -21,15 +21,14 @@ Example:
 from __future__ import annotations
 
 import ast
-import os
-import shutil
-import tempfile
+from functools import partial
 from pathlib import Path
-from typing import Any
+from typing import Any, BinaryIO
 
 import numpy as np
 
 from graph.errors import InputError, MapFormatError
+from torchratslam._atomic import write_directory_atomically
 from torchratslam.state import MapState
 
 __all__ = ["FILES", "is_reference_map", "read_reference", "write_reference"]
@@ -265,6 +264,10 @@ def _ids(values: np.ndarray) -> str:
     return "[" + ", ".join(str(int(v)) for v in values) + "]"
 
 
+def _write_bytes(fh: BinaryIO, data: bytes) -> None:
+    fh.write(data)
+
+
 def write_reference(state: MapState, directory: str | Path) -> Path:
     """Write ``state`` in the reference format (five text files), atomically.
 
@@ -346,22 +349,6 @@ def write_reference(state: MapState, directory: str | Path) -> Path:
         FILES[3]: ex + tail_exp,
         FILES[4]: lk + tail_exp,
     }
-    tmp = Path(tempfile.mkdtemp(prefix=f".{target.name}.tmp-", dir=target.parent))
-    try:
-        for name, lines in contents.items():
-            with open(tmp / name, "w") as fh:
-                fh.write("\n".join(lines) + "\n")
-                fh.flush()
-                os.fsync(fh.fileno())
-        if target.exists():
-            old = Path(tempfile.mkdtemp(prefix=f".{target.name}.old-", dir=target.parent))
-            old.rmdir()
-            os.rename(target, old)
-            os.rename(tmp, target)
-            shutil.rmtree(old, ignore_errors=True)
-        else:
-            os.rename(tmp, target)
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
-    return target
+    texts = {name: ("\n".join(lines) + "\n").encode() for name, lines in contents.items()}
+    writers = {name: partial(_write_bytes, data=data) for name, data in texts.items()}
+    return write_directory_atomically(target, writers)

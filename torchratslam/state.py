@@ -34,10 +34,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
-import os
 import re
-import shutil
-import tempfile
 import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -46,6 +43,7 @@ from typing import Any
 import numpy as np
 
 from graph.errors import InputError, MapFormatError
+from torchratslam._atomic import write_directory_atomically
 
 __all__ = [
     "FORMAT_NAME",
@@ -418,28 +416,13 @@ def save_map(state: MapState, directory: str | Path) -> Path:
         "scalars": state.scalars,
         "counts": state.summary(),
     }
-    tmp = Path(tempfile.mkdtemp(prefix=f".{target.name}.tmp-", dir=target.parent))
-    try:
-        with open(tmp / STATE_NPZ, "wb") as fh:
-            np.savez(fh, **arrays)
-            fh.flush()
-            os.fsync(fh.fileno())
-        with open(tmp / STATE_JSON, "w") as fh:
-            json.dump(meta, fh, indent=1, default=_json_default)
-            fh.flush()
-            os.fsync(fh.fileno())
-        if target.exists():
-            old = Path(tempfile.mkdtemp(prefix=f".{target.name}.old-", dir=target.parent))
-            old.rmdir()
-            os.rename(target, old)
-            os.rename(tmp, target)
-            shutil.rmtree(old, ignore_errors=True)
-        else:
-            os.rename(tmp, target)
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
-    return target
+
+    def write_json(fh) -> None:
+        fh.write(json.dumps(meta, indent=1, default=_json_default).encode())
+
+    return write_directory_atomically(
+        target, {STATE_NPZ: lambda fh: np.savez(fh, **arrays), STATE_JSON: write_json}
+    )
 
 
 def load_map(directory: str | Path) -> MapState:

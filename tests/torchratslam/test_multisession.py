@@ -96,15 +96,13 @@ def test_session2_merges_with_session1_and_retraverses_without_new_experiences(
 
 
 @pytest.mark.slow
-def test_multisession_map_has_as_many_experiences_as_the_continuous_single_session(
-    tour, session2
-):
+def test_multisession_map_has_as_many_experiences_as_the_continuous_single_session(tour, session2):
     """The paper's comparison: the same stretch driven in one continuous session (session
     1, on through the unmapped quarter, then session 2) gives the same number of
     experiences, within 2 %, and a map of the same shape."""
     from torchratslam.eval import icp
 
-    ms, counts = session2
+    ms, _ = session2
     cont = tour.continuous()
     start2 = {p["name"]: p["start"] for p in cont.info["parts"]}["session2"]
     single = RatSLAM(CONFIG)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import json
 import math
 
@@ -363,7 +364,7 @@ def test_continuous_traversal_drives_the_roads_between_sessions(name):
     parts = c.info["parts"]
     assert [p["name"] for p in parts][::2] == [s.name for s in ss]
     assert parts[0]["start"] == 0 and parts[-1]["stop"] == len(c)
-    assert all(a["stop"] == b["start"] for a, b in zip(parts, parts[1:]))
+    assert all(a["stop"] == b["start"] for a, b in itertools.pairwise(parts))
     # it contains every session's frames unchanged: poses, noise keys, hence images
     by_name = {p["name"]: p for p in parts}
     for s in ss:
@@ -389,7 +390,7 @@ def test_continuous_traversal_drives_the_roads_between_sessions(name):
     for p in parts[1::2]:
         pts = c.poses[p["start"] - 1 : p["stop"] + 1, :2]
         assert _seg_dist(pts, walls).min() > 0.05 * (0.1 if name == "irat_like" else 1.0)
-        assert not any(_crosses(a, b, walls) for a, b in zip(pts[:-1], pts[1:]))
+        assert not any(_crosses(a, b, walls) for a, b in itertools.pairwise(pts))
     # odometry (noise off) integrates back to the ground truth: brute-force loop
     x, y, th = c.poses[0]
     for k in range(1, len(c)):

@@ -4,6 +4,7 @@ A spec names a tour, optionally a session and options::
 
     sim:loop                      the whole tour (Tour.full(): sessions concatenated)
     sim:virtual_tour/session2     one session (also /2, or /full)
+    sim:virtual_tour/continuous   every session in one continuous run (Tour.continuous())
     sim:loop?laps=2&lasers=0      options of get_tour (values parsed as YAML scalars)
     sim:lab_tour/session1?seed=3
 

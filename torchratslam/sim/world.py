@@ -333,9 +333,7 @@ class WorldBuilder:
         if length <= 0:
             raise InputError(f"wall segment {p} -> {q} has zero length; give distinct ends")
         if not isinstance(texture, np.ndarray):
-            texture = make_texture(
-                self.rng, length, kind=texture, style=self.style, scale=scale
-            )
+            texture = make_texture(self.rng, length, kind=texture, style=self.style, scale=scale)
         self._segs.append((p[0], p[1], q[0], q[1]))
         self._heights.append(self.wall_height if height is None else float(height))
         self._tex.append(np.asarray(texture, np.float32))
