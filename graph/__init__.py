@@ -3,9 +3,11 @@
 This package must never import ``torchratslam`` (a test enforces the direction).
 """
 
+from graph.backends import make_backend
 from graph.errors import ConfigError, GraphError, InputError, MapFormatError, RatSLAMError
 from graph.messages import Action, ActionKind
 from graph.params import ExperienceMapParams, Params
+from graph.posegraph import PoseGraph
 
 __all__ = [
     "Action",
@@ -16,5 +18,7 @@ __all__ = [
     "InputError",
     "MapFormatError",
     "Params",
+    "PoseGraph",
     "RatSLAMError",
+    "make_backend",
 ]

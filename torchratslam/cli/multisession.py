@@ -264,6 +264,13 @@ def write_figures(result: dict[str, Any], out: Path) -> list[Path]:
     final = multi["maps"][-1]
     ses = _session_of(final, bounds)
     fig, ax = plt.subplots(figsize=(5, 5))
+    from matplotlib.collections import LineCollection
+
+    lk = links(final)
+    across = lk[ses[lk[:, 0]] != ses[lk[:, 1]]]  # links joining the sessions' maps
+    if len(across):
+        seg = final.exp_pose[across][:, :, :2]
+        ax.add_collection(LineCollection(seg, colors="0.5", linewidths=0.7, linestyles=":"))
     for k in range(len(report["sessions"])):
         sel = np.flatnonzero(ses == k)
         if sel.size:
