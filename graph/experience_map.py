@@ -131,6 +131,8 @@ class ExperienceMap:
         self._g = nx.DiGraph()
         self._poses_dirty = False
         self._order: np.ndarray | None = None
+        self._version = 0  # bumped by every change of poses or links
+        self._fixed_at: tuple | None = None  # (version, params, backend) of a fixed point
         self.current_id = -1
         self.prev_id = -1
         self.accum_x = 0.0
@@ -237,6 +239,7 @@ class ExperienceMap:
         self._frame[i] = int(frame)
         self._t[i] = float(t)
         self._n = need
+        self._version += 1
         self._g.add_node(i, **self._node_attrs(i))
         return i
 
@@ -270,6 +273,7 @@ class ExperienceMap:
     def _set_link_values(self, k: int, d: float, heading: float, facing: float, dt: float) -> None:
         self._link[k] = (d, heading, facing, dt)
         self._meas[k] = _measurement_of(d, heading, facing)
+        self._version += 1
 
     def _sync_edge(self, k: int) -> None:
         self._g.edges[int(self._src[k]), int(self._dst[k])].update(self._edge_attrs(k))
@@ -345,6 +349,7 @@ class ExperienceMap:
             a[k : e - 1] = a[k + 1 : e]
         self._e = e - 1
         self._g.remove_edge(int(src), int(dst))
+        self._version += 1
         s, d = self._src[: self._e].tolist(), self._dst[: self._e].tolist()
         self._eidx = {(a, b): i for i, (a, b) in enumerate(zip(s, d))}
         self._order = None
@@ -582,15 +587,22 @@ class ExperienceMap:
         """Relax the map: ``exp_loops`` passes of the backend, poses written back.
 
         A map with fewer than two experiences or no link is left as it is, and so is
-        every map when ``exp_loops`` is 0 and the backend is the alpha rule.
+        every map when ``exp_loops`` is 0 and the backend is the alpha rule. When the
+        backend reports that its last relaxation ended on a pass that changed no pose
+        (``last_converged``, the alpha backends' exact fixed point) and neither poses nor
+        links changed since, relaxing again would return the same poses: it is skipped.
         """
         loops = self.params.exp_loops
         alpha = self.params.exp_backend.startswith("alpha")
         if self._n < 2 or self._e == 0 or (loops == 0 and alpha):
             return
+        backend = self.backend
+        key = (self._version, id(self.params), id(backend))
+        if self._fixed_at == key:
+            return
         pg = self.posegraph()
         new = np.asarray(
-            self.backend.relax(pg, passes=loops, correction=self.params.exp_correction),
+            backend.relax(pg, passes=loops, correction=self.params.exp_correction),
             dtype=np.float64,
         )
         if new.shape != (self._n, 3) or not np.all(np.isfinite(new)):
@@ -601,6 +613,9 @@ class ExperienceMap:
         self._pose[: self._n, :2] = new[:, :2]
         self._pose[: self._n, 2] = wrap_rad(new[:, 2])
         self._poses_dirty = True
+        self._version += 1
+        if getattr(backend, "last_converged", False):
+            self._fixed_at = (self._version, id(self.params), id(backend))
 
     # -------------------------------------------------------------- queries
     def links(self) -> dict[str, np.ndarray]:

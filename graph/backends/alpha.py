@@ -30,6 +30,12 @@ Two implementations:
   The colouring is cached and extended incrementally when links are appended (the
   RatSLAM online case); any other change of the edge list recolours from scratch.
   Small graphs (few links per colour) run the same schedule as a plain Python loop.
+
+Early stop (exact): a pass is a deterministic function of the poses, so once a pass
+leaves every pose bit-identical every later pass would too; :class:`AlphaBackend` then
+stops and returns what running all ``passes`` would return (``last_passes`` and
+``last_converged`` say what happened). A map whose links are all satisfied (e.g. a
+RatSLAM map before its first loop closure) is such a fixed point.
 """
 
 from __future__ import annotations
@@ -209,6 +215,10 @@ class AlphaBackend:
         self._plan_key: tuple[int, int] | None = None
         self._perm = np.zeros(0, np.int64)
         self._splits: list[int] = []
+        self.last_passes = 0
+        """Passes the last :meth:`relax` ran (fewer than asked after an exact fixed point)."""
+        self.last_converged = False
+        """True if the last :meth:`relax` ended on a pass that changed no pose (bit-exact)."""
 
     def reset(self) -> None:
         """Forget the cached schedule."""
@@ -244,6 +254,7 @@ class AlphaBackend:
         """
         _check(passes, correction)
         p = pg.poses.copy()
+        self.last_passes, self.last_converged = 0, pg.num_edges == 0
         if passes == 0 or pg.num_edges == 0:
             return p
         self._plan(pg)
@@ -252,7 +263,11 @@ class AlphaBackend:
         if pg.num_edges < SCALAR_EDGES_PER_CLASS * len(self._splits):
             # few links per class: numpy's per-call overhead dominates, so run the SAME
             # schedule (colour by colour) link by link in plain Python
-            return _relax_scalar(p, e.tolist(), m.tolist(), passes, float(correction))
+            out, self.last_passes = _relax_scalar(
+                p, e.tolist(), m.tolist(), passes, float(correction)
+            )
+            self.last_converged = self.last_passes < passes
+            return out
         mz = m[:, 0] + 1j * m[:, 1]
         mth = m[:, 2] - math.pi  # folds the +pi of the angle wrap into the constant
         classes = []
@@ -263,12 +278,16 @@ class AlphaBackend:
             start = stop
         z = p[:, 0] + 1j * p[:, 1]
         if correction == 0.5:
-            return _relax_half(z, p[:, 2], classes, passes)
+            out, self.last_passes = _relax_half(z, p[:, 2], classes, passes)
+            self.last_converged = self.last_passes < passes
+            return out
         th = p[:, 2].copy()  # unwrapped inside the loop; only differences matter
         c = float(correction)
         pi, two_pi = math.pi, TWO_PI
         exp, rint = np.exp, np.rint
-        for _ in range(passes):
+        self.last_passes = passes
+        for done in range(passes):
+            z0, th0 = z.copy(), th.copy()
             for f, t, lz, lth in classes:
                 thf = th[f]
                 tht = th[t]
@@ -281,14 +300,27 @@ class AlphaBackend:
                 df = (raw - two_pi * rint(raw * (1.0 / two_pi))) * c
                 th[f] = thf + df
                 th[t] = tht - df
+            if np.array_equal(z, z0) and np.array_equal(th, th0):
+                self.last_passes = done + 1
+                break
+        self.last_converged = self.last_passes < passes
         return np.stack([z.real, z.imag, np.remainder(th + pi, two_pi) - pi], axis=1)
 
 
-def _relax_scalar(p: np.ndarray, edges: list, meas: list, passes: int, c: float) -> np.ndarray:
-    """The alpha rule link by link in the given order (small graphs)."""
+def _relax_scalar(
+    p: np.ndarray, edges: list, meas: list, passes: int, c: float
+) -> tuple[np.ndarray, int]:
+    """The alpha rule link by link in the given order (small graphs).
+
+    Returns:
+        The poses and the number of passes run (fewer than ``passes`` when a pass left
+        every pose bit-identical, after which every further pass would too).
+    """
     x, y, th = (p[:, k].tolist() for k in range(3))
     cos, sin, pi = math.cos, math.sin, math.pi
-    for _ in range(passes):
+    ran = passes
+    for done in range(passes):
+        x0, y0, th0 = x[:], y[:], th[:]
         for (f, t), (mx, my, mth) in zip(edges, meas):
             cf, sf = cos(th[f]), sin(th[f])
             ex = (x[t] - x[f] - cf * mx + sf * my) * c
@@ -300,20 +332,31 @@ def _relax_scalar(p: np.ndarray, edges: list, meas: list, passes: int, c: float)
             df = ((th[t] - th[f] - mth + pi) % TWO_PI - pi) * c
             th[f] = (th[f] + df + pi) % TWO_PI - pi
             th[t] = (th[t] - df + pi) % TWO_PI - pi
-    return np.stack([np.array(x), np.array(y), np.array(th)], axis=1)
+        if x == x0 and y == y0 and th == th0:
+            ran = done + 1
+            break
+    return np.stack([np.array(x), np.array(y), np.array(th)], axis=1), ran
 
 
-def _relax_half(z: np.ndarray, th: np.ndarray, classes: list, passes: int) -> np.ndarray:
+def _relax_half(
+    z: np.ndarray, th: np.ndarray, classes: list, passes: int
+) -> tuple[np.ndarray, int]:
     """Alpha rule for c = 0.5 without transcendental functions.
 
     Orientations are kept as unit complex numbers r = exp(i th). Half the wrapped angle
     error of a link is the principal square root of q = r_t conj(r_f) exp(-i dth), and
     for a unit q that root is (1 + q) / |1 + q| (the half-angle formula). So a link
     costs a few complex multiplications and one absolute value.
+
+    Returns:
+        The poses and the number of passes run (fewer than ``passes`` when a pass left
+        ``z`` and ``r`` bit-identical, after which every further pass would too).
     """
     r = np.exp(1j * th)
     ms = [(f, t, lz, np.exp(-1j * (lth + math.pi))) for f, t, lz, lth in classes]
-    for _ in range(passes):
+    ran = passes
+    for done in range(passes):
+        z0, r0 = z.copy(), r.copy()
         for f, t, lz, um in ms:
             rf = r[f]
             rt = r[t]
@@ -333,4 +376,7 @@ def _relax_half(z: np.ndarray, th: np.ndarray, classes: list, passes: int) -> np
             r[f] = rf * h
             r[t] = rt * h.conjugate()
         r /= np.abs(r)  # keep |r| = 1 against rounding drift
-    return np.stack([z.real, z.imag, np.angle(r)], axis=1)
+        if np.array_equal(z, z0) and np.array_equal(r, r0):
+            ran = done + 1
+            break
+    return np.stack([z.real, z.imag, np.angle(r)], axis=1), ran
