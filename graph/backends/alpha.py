@@ -31,11 +31,12 @@ Two implementations:
   RatSLAM online case); any other change of the edge list recolours from scratch.
   Small graphs (few links per colour) run the same schedule as a plain Python loop.
 
-Early stop (exact): a pass is a deterministic function of the poses, so once a pass
-leaves every pose bit-identical every later pass would too; :class:`AlphaBackend` then
-stops and returns what running all ``passes`` would return (``last_passes`` and
-``last_converged`` say what happened). A map whose links are all satisfied (e.g. a
-RatSLAM map before its first loop closure) is such a fixed point.
+Early stop: ``relax(..., tol=...)`` (:class:`AlphaBackend` only) stops after the first
+pass when that pass moved no coordinate by more than ``tol`` (metres, radians): the
+graph is at the sweep's fixed point (to rounding) and the remaining passes would only
+shuffle rounding noise. ``last_passes`` and ``last_converged`` say what happened. The
+default ``tol=0`` stops only when the first pass changed nothing at all, which leaves
+the result bit-identical to running every pass.
 """
 
 from __future__ import annotations
@@ -218,7 +219,7 @@ class AlphaBackend:
         self.last_passes = 0
         """Passes the last :meth:`relax` ran (fewer than asked after an exact fixed point)."""
         self.last_converged = False
-        """True if the last :meth:`relax` ended on a pass that changed no pose (bit-exact)."""
+        """True if the first pass of the last :meth:`relax` moved nothing by more than ``tol``."""
 
     def reset(self) -> None:
         """Forget the cached schedule."""
@@ -246,13 +247,24 @@ class AlphaBackend:
         self._splits = np.cumsum(np.bincount(group)).tolist() if len(group) else []
         self._plan_key = key
 
-    def relax(self, pg: PoseGraph, *, passes: int, correction: float = 0.5) -> np.ndarray:
+    def relax(
+        self, pg: PoseGraph, *, passes: int, correction: float = 0.5, tol: float = 0.0
+    ) -> np.ndarray:
         """Run ``passes`` Gauss-Seidel passes of the alpha rule, vectorised per class.
+
+        Args:
+            pg: the graph.
+            passes: number of passes.
+            correction: ``exp_correction`` (the rule's ``c``).
+            tol: stop after the first pass if it moved no x, y (m) or th (rad) by more
+                than this (the graph is at a fixed point; see the module doc).
 
         Returns:
             (N, 3) float64 relaxed poses, angles in ``[-pi, pi)`` (``pg`` is not modified).
         """
         _check(passes, correction)
+        if not tol >= 0.0:
+            raise ConfigError(f"tol must be >= 0, got {tol!r}")
         p = pg.poses.copy()
         self.last_passes, self.last_converged = 0, pg.num_edges == 0
         if passes == 0 or pg.num_edges == 0:
@@ -264,7 +276,7 @@ class AlphaBackend:
             # few links per class: numpy's per-call overhead dominates, so run the SAME
             # schedule (colour by colour) link by link in plain Python
             out, self.last_passes = _relax_scalar(
-                p, e.tolist(), m.tolist(), passes, float(correction)
+                p, e.tolist(), m.tolist(), passes, float(correction), tol
             )
             self.last_converged = self.last_passes < passes
             return out
@@ -278,7 +290,7 @@ class AlphaBackend:
             start = stop
         z = p[:, 0] + 1j * p[:, 1]
         if correction == 0.5:
-            out, self.last_passes = _relax_half(z, p[:, 2], classes, passes)
+            out, self.last_passes = _relax_half(z, p[:, 2], classes, passes, tol)
             self.last_converged = self.last_passes < passes
             return out
         th = p[:, 2].copy()  # unwrapped inside the loop; only differences matter
@@ -286,8 +298,8 @@ class AlphaBackend:
         pi, two_pi = math.pi, TWO_PI
         exp, rint = np.exp, np.rint
         self.last_passes = passes
+        z0, th0 = z.copy(), th.copy()
         for done in range(passes):
-            z0, th0 = z.copy(), th.copy()
             for f, t, lz, lth in classes:
                 thf = th[f]
                 tht = th[t]
@@ -300,27 +312,33 @@ class AlphaBackend:
                 df = (raw - two_pi * rint(raw * (1.0 / two_pi))) * c
                 th[f] = thf + df
                 th[t] = tht - df
-            if np.array_equal(z, z0) and np.array_equal(th, th0):
-                self.last_passes = done + 1
+            if done == 0 and passes > 1 and _moved(z, z0, th - th0) <= tol:
+                self.last_passes = 1
                 break
         self.last_converged = self.last_passes < passes
         return np.stack([z.real, z.imag, np.remainder(th + pi, two_pi) - pi], axis=1)
 
 
+def _moved(z: np.ndarray, z0: np.ndarray, dth: np.ndarray) -> float:
+    """Largest change of x, y or (wrapped) th between two states."""
+    dz = z - z0
+    dth = np.remainder(dth + math.pi, TWO_PI) - math.pi
+    return float(max(np.abs(dz.real).max(), np.abs(dz.imag).max(), np.abs(dth).max()))
+
+
 def _relax_scalar(
-    p: np.ndarray, edges: list, meas: list, passes: int, c: float
+    p: np.ndarray, edges: list, meas: list, passes: int, c: float, tol: float = 0.0
 ) -> tuple[np.ndarray, int]:
     """The alpha rule link by link in the given order (small graphs).
 
     Returns:
-        The poses and the number of passes run (fewer than ``passes`` when a pass left
-        every pose bit-identical, after which every further pass would too).
+        The poses and the number of passes run (1 when the first pass moved nothing by
+        more than ``tol``).
     """
     x, y, th = (p[:, k].tolist() for k in range(3))
     cos, sin, pi = math.cos, math.sin, math.pi
     ran = passes
     for done in range(passes):
-        x0, y0, th0 = x[:], y[:], th[:]
         for (f, t), (mx, my, mth) in zip(edges, meas):
             cf, sf = cos(th[f]), sin(th[f])
             ex = (x[t] - x[f] - cf * mx + sf * my) * c
@@ -332,14 +350,16 @@ def _relax_scalar(
             df = ((th[t] - th[f] - mth + pi) % TWO_PI - pi) * c
             th[f] = (th[f] + df + pi) % TWO_PI - pi
             th[t] = (th[t] - df + pi) % TWO_PI - pi
-        if x == x0 and y == y0 and th == th0:
-            ran = done + 1
-            break
+        if done == 0 and passes > 1:
+            z1 = np.array(x) + 1j * np.array(y)
+            if _moved(z1, p[:, 0] + 1j * p[:, 1], np.array(th) - p[:, 2]) <= tol:
+                ran = 1
+                break
     return np.stack([np.array(x), np.array(y), np.array(th)], axis=1), ran
 
 
 def _relax_half(
-    z: np.ndarray, th: np.ndarray, classes: list, passes: int
+    z: np.ndarray, th: np.ndarray, classes: list, passes: int, tol: float = 0.0
 ) -> tuple[np.ndarray, int]:
     """Alpha rule for c = 0.5 without transcendental functions.
 
@@ -349,14 +369,14 @@ def _relax_half(
     costs a few complex multiplications and one absolute value.
 
     Returns:
-        The poses and the number of passes run (fewer than ``passes`` when a pass left
-        ``z`` and ``r`` bit-identical, after which every further pass would too).
+        The poses and the number of passes run (1 when the first pass moved nothing by
+        more than ``tol``).
     """
     r = np.exp(1j * th)
     ms = [(f, t, lz, np.exp(-1j * (lth + math.pi))) for f, t, lz, lth in classes]
     ran = passes
+    z0, r0 = z.copy(), r.copy()
     for done in range(passes):
-        z0, r0 = z.copy(), r.copy()
         for f, t, lz, um in ms:
             rf = r[f]
             rt = r[t]
@@ -376,7 +396,7 @@ def _relax_half(
             r[f] = rf * h
             r[t] = rt * h.conjugate()
         r /= np.abs(r)  # keep |r| = 1 against rounding drift
-        if np.array_equal(z, z0) and np.array_equal(r, r0):
-            ran = done + 1
+        if done == 0 and passes > 1 and _moved(z, z0, np.angle(r * r0.conjugate())) <= tol:
+            ran = 1
             break
     return np.stack([z.real, z.imag, np.angle(r)], axis=1), ran
