@@ -245,6 +245,8 @@ class PoseCellNetwork(nn.Module):
         self._occ_key: tuple[int, int] | None = None
         self.last_crop: tuple[int, int, int] = (th, xy, xy)
         self._best = torch.zeros(self.batch_size, 3, dtype=torch.float64)
+        self._ring_key: tuple | None = None
+        self._ring_cache: list[tuple[np.ndarray, np.ndarray, int]] = []
         self.reset()
 
     # ------------------------------------------------------------------ state
@@ -386,10 +388,15 @@ class PoseCellNetwork(nn.Module):
                 out (every cell at or below ``pc_global_inhib``).
         """
         b = self.batch_size
-        vt = _as_batch(vtrans, b, "vtrans")
-        vr = _as_batch(vrot, b, "vrot")
-        d = _as_batch(dt, b, "dt")
-        if not (np.isfinite(vt).all() and np.isfinite(vr).all() and np.isfinite(d).all()):
+        if b == 1 and type(vtrans) is float and type(vrot) is float and type(dt) is float:
+            vt, vr, d = np.array([vtrans]), np.array([vrot]), np.array([dt])  # fast path
+            finite = math.isfinite(vtrans) and math.isfinite(vrot) and math.isfinite(dt)
+        else:
+            vt = _as_batch(vtrans, b, "vtrans")
+            vr = _as_batch(vrot, b, "vrot")
+            d = _as_batch(dt, b, "dt")
+            finite = np.isfinite(vt).all() and np.isfinite(vr).all() and np.isfinite(d).all()
+        if not finite:
             raise InputError(f"odometry must be finite, got vtrans={vtrans}, vrot={vrot}, dt={dt}")
         trans = vt * d / self.params.pc_cell_x_size  # cells along each layer's heading
         rot = vr * d / (2.0 * math.pi / self.dims[2])  # theta cells
@@ -411,7 +418,14 @@ class PoseCellNetwork(nn.Module):
         self.activity.copy_(a)
         self._occ = None
         self.last_crop = tuple(self.activity.shape[1:])
-        return torch.argmax(self.activity.reshape(self.batch_size, -1), dim=1)
+        return self._argmax()
+
+    def _argmax(self) -> torch.Tensor | np.ndarray:
+        """Flat index of the most active cell of each network (first on ties)."""
+        act = self.activity.detach().reshape(self.batch_size, -1)
+        if act.device.type == "cpu":  # numpy's argmax has less per-call overhead
+            return act.numpy().argmax(axis=1)
+        return torch.argmax(act, dim=1)
 
     def _workspace(self, shape: tuple[int, ...], count: int) -> list[torch.Tensor]:
         """``count`` scratch tensors of ``shape``, carved from one reused allocation
@@ -573,34 +587,47 @@ class PoseCellNetwork(nn.Module):
         return torch.where(a == top, flat, n_t * n_y * n_x).amin(dim=1)
 
     # --------------------------------------------------------------- decode
-    def _decode(self, peak: torch.Tensor) -> torch.Tensor:
+    def _rings(self) -> list[tuple[np.ndarray, np.ndarray, int]]:
+        """Per axis (x, y, th): the wrapped ``+-pc_cells_to_avg`` window of every cell,
+        ``(n, 2c + 1)``, the unit phasors ``exp(2 pi i k / n)``, and ``n`` (cached)."""
+        c = self.params.pc_cells_to_avg
+        key = (c, self.dims)
+        if self._ring_key != key:
+            off = np.arange(-c, c + 1)
+            self._ring_cache = []
+            for n in self.dims:
+                ang = np.arange(n) * (2.0 * math.pi / n)
+                ring = np.remainder(np.arange(n)[:, None] + off, n)
+                self._ring_cache.append((ring, np.cos(ang) + 1j * np.sin(ang), n))
+            self._ring_key = key
+        return self._ring_cache
+
+    def _decode(self, peak: torch.Tensor | np.ndarray) -> torch.Tensor:
         """Population-vector centre of the cube of ``+-pc_cells_to_avg`` cells around
         the most active cell (flat index ``peak``, one per network), with wrap."""
         b = self.batch_size
         n_x, n_y, n_t = self.dims
-        pk = peak.cpu().numpy()
+        pk = peak.cpu().numpy() if isinstance(peak, torch.Tensor) else np.asarray(peak)
         pt, py, px = pk // (n_y * n_x), (pk // n_x) % n_y, pk % n_x
-        c = self.params.pc_cells_to_avg
-        off = np.arange(-c, c + 1)
-        it = np.remainder(pt[:, None] + off, n_t)
-        iy = np.remainder(py[:, None] + off, n_y)
-        ix = np.remainder(px[:, None] + off, n_x)
-        flat = (
-            it[:, :, None, None] * (n_y * n_x) + iy[:, None, :, None] * n_x + ix[:, None, None, :]
-        )
-        index = torch.from_numpy(flat.reshape(b, -1)).to(self.device)
-        cube = torch.gather(self.activity.reshape(b, -1), 1, index).cpu().numpy()
-        cube = cube.astype(np.float64).reshape(b, 2 * c + 1, 2 * c + 1, 2 * c + 1)
+        (wx, ex, _), (wy, ey, _), (wt, et, _) = self._rings()
+        ix, iy, it = wx[px], wy[py], wt[pt]  # (B, 2c + 1) each
+        act = self.activity.detach()
+        act = act.numpy() if act.device.type == "cpu" else act.cpu().numpy()
+        cube = act[
+            np.arange(b)[:, None, None, None],
+            it[:, :, None, None],
+            iy[:, None, :, None],
+            ix[:, None, None, :],
+        ].astype(np.float64)
         out = np.empty((b, 3), dtype=np.float64)
-        for col, (sums, ring, n) in enumerate(
+        for col, (sums, ring, phasor, n) in enumerate(
             (
-                (cube.sum(axis=(1, 2)), ix, n_x),
-                (cube.sum(axis=(1, 3)), iy, n_y),
-                (cube.sum(axis=(2, 3)), it, n_t),
+                (cube.sum(axis=(1, 2)), ix, ex, n_x),
+                (cube.sum(axis=(1, 3)), iy, ey, n_y),
+                (cube.sum(axis=(2, 3)), it, et, n_t),
             )
         ):
-            ang = ring * (2.0 * math.pi / n)
-            v = np.arctan2((sums * np.sin(ang)).sum(1), (sums * np.cos(ang)).sum(1))
+            v = np.angle((sums * phasor[ring]).sum(1))
             pos = np.remainder(v * (n / (2.0 * math.pi)), float(n))
             out[:, col] = np.where(pos >= n, pos - n, pos)
         return torch.from_numpy(out)

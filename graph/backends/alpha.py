@@ -203,6 +203,7 @@ class AlphaBackend:
 
     name = "alpha"
     incremental = True
+    accepts_tol = True
 
     def __init__(self, schedule: str = "colour") -> None:
         if schedule not in SCHEDULES:

@@ -234,6 +234,40 @@ def test_alpha_grows_with_the_graph_like_a_fresh_backend(w100, kernel):
     )
 
 
+
+@pytest.mark.parametrize("correction", [0.5, 0.3])
+def test_alpha_early_stop_only_at_a_fixed_point(kernel, correction):
+    rng = np.random.default_rng(7)
+    pg, truth = _random_graph(rng, n=60, loops=20)
+    # consistent graph at its solution: the first pass moves nothing, one pass suffices
+    exact = PoseGraph(truth, pg.edges, between(truth[pg.edges[:, 0]], truth[pg.edges[:, 1]]))
+    b = AlphaBackend()
+    out = b.relax(exact, passes=20, correction=correction, tol=1e-12)
+    assert b.last_passes == 1 and b.last_converged
+    np.testing.assert_allclose(out, truth, atol=1e-12)
+    # a noisy graph far from its fixed point runs every pass, bit-identical to tol=0
+    b0, b1 = AlphaBackend(), AlphaBackend()
+    full = b0.relax(pg, passes=20, correction=correction)
+    assert b0.last_passes == 20 and not b0.last_converged
+    np.testing.assert_array_equal(b1.relax(pg, passes=20, correction=correction, tol=1e-9), full)
+    assert b1.last_passes == 20
+    # the brute-force sweep in the colour order agrees with the full run
+    colour = b0._colouring.colour
+    sweep = np.lexsort((np.arange(len(colour)), colour)).tolist()
+    np.testing.assert_allclose(full, _sequential_alpha(pg, sweep, 20, correction), atol=1e-9)
+    # at the sweep's fixed point: stopping early equals running every pass to ~1e-9
+    settled = PoseGraph(b0.relax(pg, passes=3000, correction=correction), pg.edges, pg.measurements)
+    b2 = AlphaBackend()
+    early = b2.relax(settled, passes=20, correction=correction, tol=1e-9)
+    assert b2.last_passes == 1 and b2.last_converged
+    always = _sequential_alpha(settled, sweep, 20, correction)
+    diff = early - always
+    diff[:, 2] = wrap_angle(diff[:, 2])
+    assert np.abs(diff).max() < 1e-8
+    with pytest.raises(ConfigError, match="tol"):
+        b2.relax(pg, passes=2, tol=-1.0)
+
+
 # ---------------------------------------------------------------- gtsam and iSAM2
 
 

@@ -479,3 +479,36 @@ def test_every_backend_relaxes_the_map_online(name):
     em.set_state(state)  # a stateful backend starts again from the restored map
     em.iterate()
     assert np.all(np.isfinite(em.poses))
+
+
+def test_converged_relaxation_stops_early_and_matches_always_running():
+    """relax_tol: passes stop at the sweep's fixed point; the map equals the always-run one."""
+    _backends_or_skip()
+    maps = []
+    for tol in (ExperienceMap.relax_tol, 0.0):
+        em = ExperienceMap(ExperienceMapParams(exp_loops=20, exp_backend="alpha"))
+        em.relax_tol = tol
+        calls = []
+        relax = em.backend.relax
+
+        def counting(pg, *, _relax=relax, _calls=calls, _em=em, **kw):
+            out = _relax(pg, **kw)
+            _calls.append(_em.backend.last_passes)
+            return out
+
+        em.backend.relax = counting
+        random_session(5, 40, em)
+        history = []
+        for k in range(400):  # frames that add nothing: the map settles
+            em.on_odometry(0.1, 0.0, 0.1)
+            if k == 200:  # a new loop closure mid-way
+                em.apply(Action(ActionKind.LINK, dest_id=3, relative_rad=0.0))
+            em.iterate()
+            history.append(em.poses.copy())
+        maps.append((np.array(history), calls))
+    (fast, fast_calls), (full, full_calls) = maps
+    diff = fast - full
+    diff[..., 2] = (diff[..., 2] + PI) % (2 * PI) - PI
+    assert np.abs(diff).max() < 1e-9
+    assert sum(fast_calls) < 0.7 * sum(full_calls)  # it did stop early / skip
+    assert len(fast_calls) < len(full_calls)  # ... and skipped settled frames

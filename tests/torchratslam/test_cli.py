@@ -189,3 +189,17 @@ def test_bag_topics_come_from_options_then_topic_root_then_irat_defaults():
     assert _topics(none, cfg) == ("/stlucia/camera/image/compressed", "/stlucia/odom")
     given = argparse.Namespace(image_topic="/cam", odom_topic=None)
     assert _topics(given, cfg) == ("/cam", "/stlucia/odom")
+
+
+def test_commands_default_to_one_torch_thread_and_reject_bad_thread_counts(monkeypatch, capsys):
+    import torch
+
+    from torchratslam.cli import main
+
+    torch.set_num_threads(2)
+    monkeypatch.delenv("TORCHRATSLAM_THREADS", raising=False)
+    assert main(["simulate", "no_such_tour", "--out", "/nonexistent/x"]) == 2
+    assert torch.get_num_threads() == 1
+    monkeypatch.setenv("TORCHRATSLAM_THREADS", "lots")
+    assert main(["simulate", "loop", "--out", "/nonexistent/x"]) == 2
+    assert "TORCHRATSLAM_THREADS" in capsys.readouterr().err
