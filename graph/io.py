@@ -215,7 +215,9 @@ def read_posegraph(
         raise MapFormatError(f"{path.name}: {exc}") from None
 
 
-def _atomic_write(path: Path, text: str) -> None:
+def atomic_write_text(path: Path, text: str) -> None:
+    """Write ``text`` to ``path`` through a temporary file and a rename, so a crash never
+    leaves a half-written file (an existing file is replaced only by a complete one)."""
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
     try:
@@ -240,7 +242,7 @@ def _write(pg: PoseGraph, path: str | os.PathLike, fmt: str) -> None:
     eids = ids[pg.edges].tolist()
     for (a, b), m, u in zip(eids, pg.measurements.tolist(), upper.tolist()):
         lines.append(f"{etag} {a} {b} " + " ".join(repr(v) for v in (*m, *u)))
-    _atomic_write(Path(path), "\n".join(lines) + "\n")
+    atomic_write_text(Path(path), "\n".join(lines) + "\n")
 
 
 def write_g2o(pg: PoseGraph, path: str | os.PathLike) -> None:

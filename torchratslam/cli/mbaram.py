@@ -10,7 +10,6 @@ import argparse
 import inspect
 import json
 import os
-import tempfile
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -18,6 +17,7 @@ from typing import Any
 import numpy as np
 
 from graph.errors import ConfigError, InputError
+from graph.io import atomic_write_text
 from torchratslam.messages import Frame
 
 # parameter presets: the paper's Table 3 values, and those used for the results in
@@ -134,17 +134,6 @@ def split_laps(lap_ids: np.ndarray, laps: int, loc_laps: int) -> tuple[list, lis
     return ranges[:laps], ranges[laps:]
 
 
-def _atomic_write(path: Path, text: str) -> None:
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.")
-    try:
-        with os.fdopen(fd, "w") as fh:
-            fh.write(text)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-
-
 def _parse_sets(items: list[str]) -> dict[str, str]:
     out = {}
     for item in items:
@@ -255,7 +244,7 @@ def main(args: argparse.Namespace) -> int:
         "loc_laps": len(loc_r),
         "paper": PAPER,
     }
-    _atomic_write(out / "metrics.json", json.dumps(metrics, indent=2) + "\n")
+    atomic_write_text(out / "metrics.json", json.dumps(metrics, indent=2) + "\n")
     state = result.model.get_state()
     arrays = {k.replace("/", "__"): np.asarray(v) for k, v in state.items() if k != "params"}
     tmp = out / ".state.tmp.npz"
