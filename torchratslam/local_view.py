@@ -760,6 +760,10 @@ class _TemplateView:
         """``(Y, X)`` of the templates (None before the size is known)."""
         return None if self.bank is None else (self.bank.y_size, self.bank.x_size)
 
+    _trusted_templates = False
+    """True when :meth:`_to_template` always returns finite templates of the bank's
+    shape, dtype and device (then :meth:`process` skips re-checking them)."""
+
     def _to_template(self, observation: Any) -> torch.Tensor:
         raise NotImplementedError
 
@@ -814,7 +818,10 @@ class _TemplateView:
         Shape:
             template: ``(Y, X)``.
         """
-        t = self._check_template(template)
+        return self._search(self._check_template(template), threshold)
+
+    def _search(self, t: torch.Tensor, threshold: float | None) -> tuple[int, int, float]:
+        """:meth:`match` of an already checked template (``process`` made it itself)."""
         if self.bank is None or len(self.bank) == 0:
             return -1, 0, math.inf
         return self.matcher.search(
@@ -852,7 +859,9 @@ class _TemplateView:
         view = self._to_template(observation)
         self.frame_counter += 1
         threshold = None if self.exact_errors else self.params.vt_match_threshold
-        tid, offset, err = self.match(view, threshold=threshold)
+        if not self._trusted_templates:
+            view = self._check_template(view)
+        tid, offset, err = self._search(view, threshold)
         self.previous_id = self.current_id
         if tid >= 0 and err <= self.params.vt_match_threshold:
             self.current_id = tid
@@ -967,6 +976,7 @@ class LocalView(_TemplateView):
     """
 
     kind = "ratslam"
+    _trusted_templates = True  # preprocess() checks images and yields finite templates
 
     def __init__(
         self,

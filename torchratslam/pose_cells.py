@@ -241,6 +241,8 @@ class PoseCellNetwork(nn.Module):
         )
         self._mats: dict[tuple[str, int, bool], torch.Tensor] = {}
         self._work: torch.Tensor | None = None
+        self._work_views: dict[tuple, list[torch.Tensor]] = {}
+        self._gather_cache: dict[tuple, torch.Tensor] = {}
         self._occ: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
         self._occ_key: tuple[int, int] | None = None
         self.last_crop: tuple[int, int, int] = (th, xy, xy)
@@ -429,11 +431,21 @@ class PoseCellNetwork(nn.Module):
 
     def _workspace(self, shape: tuple[int, ...], count: int) -> list[torch.Tensor]:
         """``count`` scratch tensors of ``shape``, carved from one reused allocation
-        (a large step would otherwise allocate, and page-fault, a dozen big tensors)."""
+        (a large step would otherwise allocate, and page-fault, a dozen big tensors).
+        The views are cached per ``(shape, count)`` while the allocation stays."""
+        key = (shape, count)
+        views = self._work_views.get(key)
+        if views is not None:
+            return list(views)
         n = int(np.prod(shape))
         if self._work is None or self._work.numel() < n * count:
             self._work = torch.empty(n * count, dtype=self.dtype, device=self.device)
-        return [self._work[i * n : (i + 1) * n].view(shape) for i in range(count)]
+            self._work_views = {}
+        views = [self._work[i * n : (i + 1) * n].view(shape) for i in range(count)]
+        if len(self._work_views) > 64:  # crop shapes vary: keep the cache small
+            self._work_views = {}
+        self._work_views[key] = views
+        return list(views)
 
     def _dynamics(self, a: torch.Tensor, circ: tuple[bool, bool, bool]) -> list[torch.Tensor]:
         """Excite, inhibit, global inhibition, clamp, normalise ``a`` (B, T, Y, X) with
@@ -490,9 +502,16 @@ class PoseCellNetwork(nn.Module):
         dev = a.device
         if (ints == ints.flat[0]).all():  # one integer shift for everything: a roll
             g0.copy_(torch.roll(a, int(ints.flat[0]), dims=axis))
-        else:
-            idx = np.remainder(np.arange(n).reshape(shape) - ints.reshape(lead), n)
-            torch.gather(a, axis, torch.from_numpy(idx).to(dev).expand(a.shape), out=g0)
+        else:  # the integer parts repeat from step to step: cache their gather index
+            key = (axis, tuple(a.shape), ints.tobytes(), ints.shape, dev)
+            index = self._gather_cache.get(key)
+            if index is None:
+                idx = np.remainder(np.arange(n).reshape(shape) - ints.reshape(lead), n)
+                index = torch.from_numpy(idx).to(dev).expand(a.shape)
+                if len(self._gather_cache) > 256:
+                    self._gather_cache = {}
+                self._gather_cache[key] = index
+            torch.gather(a, axis, index, out=g0)
         if frac.any():
             w = torch.from_numpy(frac.reshape(lead)).to(device=dev, dtype=a.dtype)
             torch.lerp(g0, torch.roll(g0, 1, dims=axis), w, out=g0)

@@ -184,7 +184,7 @@ class EdgeColouring:
 
 
 SCHEDULES = ("colour", "reference")
-SCALAR_EDGES_PER_CLASS = 40
+SCALAR_EDGES_PER_CLASS = 24
 """Below this many links per class on average, a pass runs as a plain Python loop."""
 
 

@@ -234,7 +234,6 @@ def test_alpha_grows_with_the_graph_like_a_fresh_backend(w100, kernel):
     )
 
 
-
 @pytest.mark.parametrize("correction", [0.5, 0.3])
 def test_alpha_early_stop_only_at_a_fixed_point(kernel, correction):
     rng = np.random.default_rng(7)

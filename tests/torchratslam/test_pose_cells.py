@@ -533,3 +533,43 @@ def test_crop_notices_activity_written_from_outside():
 
 def test_registered_as_ratslam():
     assert POSE_CELLS.get("ratslam") is PoseCells
+
+
+def _brute_centre(act: np.ndarray, c: int) -> tuple[float, float, float]:
+    """Population vector of the (2c+1)^3 cube around the first maximum, plain loops."""
+    n_t, n_y, n_x = act.shape
+    flat = int(np.argmax(act))
+    pt, py, px = flat // (n_y * n_x), (flat // n_x) % n_y, flat % n_x
+    sums = {"x": [0.0] * n_x, "y": [0.0] * n_y, "t": [0.0] * n_t}
+    for dt in range(-c, c + 1):
+        for dy in range(-c, c + 1):
+            for dx in range(-c, c + 1):
+                t, y, x = (pt + dt) % n_t, (py + dy) % n_y, (px + dx) % n_x
+                v = float(act[t, y, x])
+                sums["x"][x] += v
+                sums["y"][y] += v
+                sums["t"][t] += v
+    out = []
+    for key, n in (("x", n_x), ("y", n_y), ("t", n_t)):
+        s = sum(w * math.sin(2 * math.pi * i / n) for i, w in enumerate(sums[key]))
+        co = sum(w * math.cos(2 * math.pi * i / n) for i, w in enumerate(sums[key]))
+        out.append((math.atan2(s, co) * n / (2 * math.pi)) % n)
+    return tuple(out)
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_decoded_centre_equals_brute_force_population_vector_across_the_wrap(seed):
+    rng = np.random.default_rng(seed)
+    params = PoseCellParams(pc_dim_xy=11, pc_dim_th=12)
+    net = PoseCellNetwork(params, 2, dtype=torch.float64)
+    acts = rng.random((2, 12, 11, 11)) * 0.1
+    acts[0, 0, 10, 0] = 5.0  # peak on the corner: the cube wraps on every axis
+    acts[1, 11, 0, 10] = 5.0
+    net.set_activity(acts)
+    got = net.centre(recompute=True).numpy()
+    for b in range(2):
+        want = _brute_centre(acts[b], params.pc_cells_to_avg)
+        diff = (got[b] - np.array(want) + np.array([5.5, 5.5, 6.0])) % np.array(
+            [11.0, 11.0, 12.0]
+        ) - np.array([5.5, 5.5, 6.0])
+        assert np.abs(diff).max() < 1e-9
