@@ -21,7 +21,7 @@ from graph.io import atomic_write_text
 from torchratslam.messages import Frame
 
 # parameter presets: the paper's Table 3 values, and those used for the results in
-# docs/readme/mbaram.md (paper values plus units and the odometry channel's S_MAX,k)
+# docs/mbaram.md (paper values plus units and the odometry channel's S_MAX,k)
 PRESETS: dict[str, dict[str, float]] = {
     "paper": {},
     "sim": {"laser_scale": 3.0, "s_max_odometry": 3e-5, "var_floor_odometry": 0.01},
