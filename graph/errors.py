@@ -44,4 +44,6 @@ def unknown_name_message(kind: str, name: str, candidates: Iterable[str]) -> str
     candidates = sorted(candidates)
     guess = nearest(name, candidates)
     hint = f"; did you mean {guess!r}?" if guess else ""
+    if guess and len(candidates) > 12:  # a long list adds noise once there is a good guess
+        return f"unknown {kind} {name!r}{hint}"
     return f"unknown {kind} {name!r}{hint} (valid: {', '.join(candidates)})"
