@@ -264,6 +264,13 @@ def _ids(values: np.ndarray) -> str:
     return "[" + ", ".join(str(int(v)) for v in values) + "]"
 
 
+def _group_indices(keys: np.ndarray, n: int) -> list[np.ndarray]:
+    """For each key value 0..n-1, the indices holding it, in increasing order (one sort)."""
+    order = np.argsort(keys, kind="stable")
+    bounds = np.searchsorted(keys[order], np.arange(n + 1))
+    return [order[bounds[i] : bounds[i + 1]] for i in range(n)]
+
+
 def _write_bytes(fh: BinaryIO, data: bytes) -> None:
     fh.write(data)
 
@@ -296,8 +303,7 @@ def write_reference(state: MapState, directory: str | Path) -> Path:
     flat_t = state.templates.reshape(n, size)
     for i in range(n):
         lv += [str(i), _num(state.template_mean[i]), " ".join(map(_num, flat_t[i]))]
-    order = np.argsort(state.exp_template, kind="stable")
-    bounds = np.searchsorted(state.exp_template[order], np.arange(n + 1))
+    exps_of_template = _group_indices(state.exp_template, n)
     pt = []
     for i in range(n):
         x, y, th = state.template_pc[i]
@@ -307,16 +313,14 @@ def write_reference(state: MapState, directory: str | Path) -> Path:
             _num(y),
             _num(th),
             _num(state.template_decay[i]),
-            _ids(order[bounds[i] : bounds[i + 1]]),
+            _ids(exps_of_template[i]),
         ]
     pe = []
     for j in range(m):
         x, y, th = state.exp_pc[j]
         pe += [_num(x), _num(y), _num(th), str(int(state.exp_template[j]))]
-    l_order = np.argsort(state.link_from, kind="stable")
-    l_bounds = np.searchsorted(state.link_from[l_order], np.arange(m + 1))
-    t_order = np.argsort(state.link_to, kind="stable")
-    t_bounds = np.searchsorted(state.link_to[t_order], np.arange(m + 1))
+    links_from = _group_indices(state.link_from, m)
+    links_to = _group_indices(state.link_to, m)
     ex = []
     for j in range(m):
         x, y, th = state.exp_pose[j]
@@ -326,8 +330,8 @@ def write_reference(state: MapState, directory: str | Path) -> Path:
             _num(y),
             _num(th),
             str(int(state.exp_template[j])),
-            _ids(l_order[l_bounds[j] : l_bounds[j + 1]]),
-            _ids(t_order[t_bounds[j] : t_bounds[j + 1]]),
+            _ids(links_from[j]),
+            _ids(links_to[j]),
             "0.0",
             "0.0",
             "0.0",
