@@ -495,50 +495,59 @@ class RatSLAM:
         # (else each worker's torch ops would use every core and oversubscribe)
         n_threads = torch.get_num_threads()
 
-        def view_worker() -> None:
-            torch.set_num_threads(n_threads)
-            try:
-                for i, frame in enumerate(frames):
-                    if stop.is_set():
-                        break
-                    odo, view = self._stage_view(frame, start + i)
-                    put(q_view, (frame, start + i, odo, view))
-            except BaseException as exc:
-                errors.append(exc)
-                stop.set()
-            finally:
-                put(q_view, _STOP)
+        def drain(q: queue.Queue) -> Any:
+            while (item := get(q)) is not _STOP:
+                yield item
 
-        def pc_worker() -> None:
-            torch.set_num_threads(n_threads)
-            try:
-                while (item := get(q_view)) is not _STOP:
-                    frame, index, odo, view = item
-                    action, pc = self._stage_pose_cells(view, odo)
-                    put(q_pc, (frame, index, odo, view, action, pc))
-            except BaseException as exc:
-                errors.append(exc)
-                stop.set()
-            finally:
-                put(q_pc, _STOP)
+        def stage(source: Any, out: queue.Queue, work: Any) -> Any:
+            """A worker: ``work`` on every item of ``source`` into ``out``, then _STOP;
+            an error stops every stage and is re-raised by the caller."""
 
-        def em_worker() -> None:
-            torch.set_num_threads(n_threads)
-            try:
-                while (item := get(q_pc)) is not _STOP:
-                    frame, index, odo, view, action, pc = item
-                    exp_id = self._stage_experience_map(frame, index, view, odo, action, pc)
-                    n_e = _n_experiences(self.experience_map)
-                    put(q_out, (frame, index, view, odo, action, pc, exp_id, n_e))
-            except BaseException as exc:
-                errors.append(exc)
-                stop.set()
-            finally:
-                put(q_out, _STOP)
+            def run() -> None:
+                torch.set_num_threads(n_threads)
+                try:
+                    for item in source:
+                        if stop.is_set():
+                            break
+                        put(out, work(item))
+                except BaseException as exc:
+                    errors.append(exc)
+                    stop.set()
+                finally:
+                    put(out, _STOP)
 
+            return run
+
+        def view_work(item: tuple[int, Frame]) -> tuple:
+            i, frame = item
+            return (frame, start + i, *self._stage_view(frame, start + i))
+
+        def pc_work(item: tuple) -> tuple:
+            _, _, odo, view = item
+            return (*item, *self._stage_pose_cells(view, odo))
+
+        def em_work(item: tuple) -> tuple:
+            frame, index, odo, view, action, pc = item
+            exp_id = self._stage_experience_map(frame, index, view, odo, action, pc)
+            return (
+                frame,
+                index,
+                view,
+                odo,
+                action,
+                pc,
+                exp_id,
+                _n_experiences(self.experience_map),
+            )
+
+        stages = {
+            "view": stage(enumerate(frames), q_view, view_work),
+            "pose_cells": stage(drain(q_view), q_pc, pc_work),
+            "experience_map": stage(drain(q_pc), q_out, em_work),
+        }
         workers = [
-            threading.Thread(target=w, name=f"ratslam-{w.__name__}", daemon=True)
-            for w in (view_worker, pc_worker, em_worker)
+            threading.Thread(target=run, name=f"ratslam-{name}", daemon=True)
+            for name, run in stages.items()
         ]
         for w in workers:
             w.start()
