@@ -23,7 +23,7 @@ $(STAMP): $(BIN)/python pyproject.toml
 install: $(STAMP)
 
 demo: $(STAMP)
-	$(BIN)/python -m torchratslam.demo --out $(OUT)
+	$(BIN)/python -m torchratslam.experiments.demo --out $(OUT)
 
 test: $(STAMP)
 	$(BIN)/python -m pytest -q -p no:cacheprovider

@@ -27,7 +27,7 @@ import torch
 import torch.nn.functional as F
 
 from torchratslam.config import LocalViewParams
-from torchratslam.local_view import LocalView
+from torchratslam.local_view.view import LocalView
 
 CPP_MS = 4.25  # OpenRatSLAM, 1781-frame panoramic loop, 271 templates of 64x16
 

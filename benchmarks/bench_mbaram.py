@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from torchratslam.mbaram import MBARAM, MBARAMParams
+from torchratslam.mbaram.model import MBARAM, MBARAMParams
 
 BEAMS = 682
 

@@ -28,7 +28,7 @@ import numpy as np
 import torch
 
 from torchratslam.config import PoseCellParams
-from torchratslam.pose_cells import PoseCellNetwork
+from torchratslam.pose_cells.network import PoseCellNetwork
 
 SIZES = (11, 21, 30, 80)
 BATCHES = (1, 32)

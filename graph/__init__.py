@@ -3,11 +3,17 @@
 This package must never import ``torchratslam`` (a test enforces the direction).
 """
 
-from graph.backends import make_backend
-from graph.errors import ConfigError, GraphError, InputError, MapFormatError, RatSLAMError
-from graph.messages import Action, ActionKind
-from graph.params import ExperienceMapParams, Params
-from graph.posegraph import PoseGraph
+from torchratslam.graph.backends import make_backend
+from torchratslam.graph.errors import (
+    ConfigError,
+    GraphError,
+    InputError,
+    MapFormatError,
+    RatSLAMError,
+)
+from torchratslam.graph.messages import Action, ActionKind
+from torchratslam.graph.params import ExperienceMapParams, Params
+from torchratslam.graph.posegraph import PoseGraph
 
 __all__ = [
     "Action",

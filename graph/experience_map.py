@@ -1,7 +1,7 @@
 """The RatSLAM experience map: a networkx graph with array views, relaxed by a backend.
 
 Behaviour follows OpenRatSLAM's ``ExperienceMap`` (``shared/reference/ratslam-algorithm.md``)
-plus the experience-map paper's features (``graph.features``):
+plus the experience-map paper's features (``torchratslam.graph.features``):
 
 * odometry accumulates ``(x, y, facing, time)`` since the current experience, the facing
   starting at ``exp_initial_em_deg``;
@@ -19,9 +19,9 @@ building the pose graph and relaxing never loops over links or nodes in Python; 
 graph's node poses are refreshed lazily when :attr:`ExperienceMap.graph` is read.
 
 Example:
-    >>> from graph.experience_map import ExperienceMap
-    >>> from graph.messages import Action, ActionKind
-    >>> from graph.params import ExperienceMapParams
+    >>> from torchratslam.graph.experience_map import ExperienceMap
+    >>> from torchratslam.graph.messages import Action, ActionKind
+    >>> from torchratslam.graph.params import ExperienceMapParams
     >>> em = ExperienceMap(ExperienceMapParams(exp_initial_em_deg=0.0))
     >>> em.apply(Action(ActionKind.CREATE, dest_id=0))
     >>> em.on_odometry(1.0, 0.0, 2.0)
@@ -38,9 +38,8 @@ from typing import Any, Protocol
 
 import networkx as nx
 import numpy as np
-
-from graph.errors import GraphError, InputError, MapFormatError
-from graph.features import (
+from torchratslam.graph.errors import GraphError, InputError, MapFormatError
+from torchratslam.graph.features import (
     Route,
     average_transition,
     experience_activity,
@@ -52,18 +51,21 @@ from graph.features import (
     temporal_map,
     wrap_rad,
 )
-from graph.messages import Action, ActionKind
-from graph.params import ExperienceMapParams
-from graph.posegraph import PoseGraph
+from torchratslam.graph.messages import Action, ActionKind
+from torchratslam.graph.params import ExperienceMapParams
+from torchratslam.graph.posegraph import PoseGraph
 
 __all__ = ["ExperienceMap", "Route"]
 
-STATE_FORMAT = "graph.experience_map"
+STATE_FORMAT = "torchratslam.graph.experience_map"
 STATE_VERSION = 1
 
 
 class RelaxationBackend(Protocol):
-    """What :meth:`ExperienceMap.iterate` needs from a backend (see ``graph.backends``)."""
+    """What :meth:`ExperienceMap.iterate` needs from a backend.
+
+    See ``torchratslam.graph.backends``.
+    """
 
     def relax(self, pg: PoseGraph, *, passes: int, correction: float = 0.5) -> np.ndarray: ...
 
@@ -89,7 +91,8 @@ class ExperienceMap:
     Args:
         params: experience-map parameters (default: OpenRatSLAM's).
         backend: a relaxation backend object with ``relax(pg, *, passes, correction)``;
-            None builds ``graph.backends.make_backend(params.exp_backend)`` on first use.
+            None builds
+                ``torchratslam.graph.backends.make_backend(params.exp_backend)`` on first use.
 
     Attributes:
         params: the parameters.
@@ -559,7 +562,9 @@ class ExperienceMap:
         return self._order
 
     def posegraph(self, order: str = "creation") -> PoseGraph:
-        """The map as a :class:`graph.posegraph.PoseGraph` (built from the arrays, no loops).
+        """The map as a :class:`~torchratslam.graph.posegraph.PoseGraph`.
+
+        Built from the arrays, no loops.
 
         Args:
             order: ``"creation"`` lists links as they were made: append-only, which
@@ -584,7 +589,7 @@ class ExperienceMap:
     def backend(self) -> RelaxationBackend:
         """The relaxation backend (built from ``exp_backend`` on first use)."""
         if self._backend is None:
-            from graph.backends import make_backend
+            from torchratslam.graph.backends import make_backend
 
             self._backend = make_backend(self.params.exp_backend)
         return self._backend
@@ -731,7 +736,7 @@ class ExperienceMap:
         Args:
             start: the seeded (peak) experience; default the current one.
             method: ``"dijkstra"`` (networkx) or ``"iterate"`` (the paper's synchronous
-                iteration, :func:`graph.features.temporal_map`); same result.
+                iteration, :func:`torchratslam.graph.features.temporal_map`); same result.
 
         Shape:
             Returns (N,) seconds, ``inf`` where unreachable.

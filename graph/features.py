@@ -12,7 +12,7 @@ an Overloaded Rat Brain" (IROS 2006), ``shared/papers/experience-map.txt``:
 * the temporal map (Eqs. 10-11) and routes: :func:`temporal_map`, :class:`Route`.
 
 Transitions are written ``[dx, dy, dth]`` everywhere in this project (the pose of the
-target in the source's frame, as in :class:`graph.posegraph.PoseGraph`); the paper
+target in the source's frame, as in :class:`torchratslam.graph.posegraph.PoseGraph`); the paper
 writes the same vector as ``(dth, dx, dy)``. Angles are wrapped to ``(-pi, pi]`` as
 OpenRatSLAM's ``clip_rad_180`` does. Everything here is numpy only (no torch).
 """
@@ -22,8 +22,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-
-from graph.errors import InputError
+from torchratslam.graph.errors import InputError
 
 TWO_PI = 2.0 * np.pi
 
@@ -183,7 +182,7 @@ def rotate_link_components(components: np.ndarray, dtheta: np.ndarray | float) -
 
     In the paper the transition ``(dx, dy)`` is stored in map coordinates, so when map
     correction turns experience ``i`` by ``dth_i`` its outgoing links must turn with it.
-    :class:`graph.experience_map.ExperienceMap` stores links relative to the source's
+    :class:`torchratslam.graph.experience_map.ExperienceMap` stores links relative to the source's
     orientation (as OpenRatSLAM does), which makes Eq. 8 hold by construction; its
     ``link_components("global")`` gives the paper's map-frame components.
 

@@ -26,9 +26,8 @@ import tempfile
 from pathlib import Path
 
 import numpy as np
-
-from graph.errors import InputError, MapFormatError
-from graph.posegraph import PoseGraph, compose_odometry
+from torchratslam.graph.errors import InputError, MapFormatError
+from torchratslam.graph.posegraph import PoseGraph, compose_odometry
 
 CITY_SIGMAS = (1.0 / 30.0, 1.0 / 30.0, 1.0 / 100.0)
 """Noise model gtsam's ISAM2_City10000 example uses for city10000 (x, y, th sigmas)."""

@@ -32,7 +32,7 @@ ROOT = Path.cwd().resolve().parent
 sys.path.insert(0, str(ROOT))
 from benchmarks.bench_local_view import Route
 from torchratslam.config import LocalViewParams
-from torchratslam.local_view import LocalView
+from torchratslam.local_view.view import LocalView
 
 params = LocalViewParams(
     template_x_size=64, template_y_size=16, vt_panoramic=True, vt_step_match=1,

@@ -22,10 +22,18 @@ from typing import Any, ClassVar
 
 import yaml
 
-from graph.errors import ConfigError, InputError, unknown_name_message
-from graph.params import ExperienceMapParams, Params, param
+from torchratslam.graph.errors import ConfigError, InputError, unknown_name_message
+from torchratslam.graph.params import ExperienceMapParams, Params, param
 
-CONFIG_DIR = Path(__file__).resolve().parent.parent / "configs"
+
+def _presets_dir() -> Path:
+    """The folder of the shipped presets (package data ``torchratslam.presets``)."""
+    import importlib.resources
+
+    return Path(str(importlib.resources.files("torchratslam.presets")))
+
+
+CONFIG_DIR = _presets_dir()
 
 __all__ = [
     "CONFIG_DIR",
@@ -241,7 +249,8 @@ def load_config(path: str | Path | None = None, **overrides: Any) -> RatSLAMConf
 
     Args:
         path: a YAML file (``.yaml``/``.yml``), an OpenRatSLAM ``.txt`` config, the name
-            of a file in ``configs/`` without extension (e.g. ``"virtual_tour"``), or
+            of a shipped preset (``configs/`` in the repository, ``torchratslam.presets``
+            when installed) without extension (e.g. ``"virtual_tour"``), or
             None for OpenRatSLAM's defaults.
         **overrides: flat keys that replace values from the file.
 

@@ -1,5 +1,11 @@
-"""Errors of torchratslam: the same hierarchy as ``graph.errors`` (one root class)."""
+"""Errors of torchratslam: the same hierarchy as ``torchratslam.graph.errors`` (one root class)."""
 
-from graph.errors import ConfigError, GraphError, InputError, MapFormatError, RatSLAMError
+from torchratslam.graph.errors import (
+    ConfigError,
+    GraphError,
+    InputError,
+    MapFormatError,
+    RatSLAMError,
+)
 
 __all__ = ["ConfigError", "GraphError", "InputError", "MapFormatError", "RatSLAMError"]

@@ -15,13 +15,13 @@ registry            factory signature (what a user-registered module must accept
 ==================  ==================================================================
 
 Default names: local view ``"ratslam"``, pose cells ``"ratslam"``, experience map
-``"ratslam"`` (:class:`graph.experience_map.ExperienceMap`, registered here) and
+``"ratslam"`` (:class:`torchratslam.graph.experience_map.ExperienceMap`, registered here) and
 odometry ``"given"`` (the reader's wheel odometry) or ``"visual"`` (intensity-profile
 visual odometry), both registered here.
 
 Per frame, in the reference's order: odometry source on the frame; local view on the
 image; pose cells on the template (``on_view_template``); pose cells on the odometry
-(``on_odometry``, returning the :class:`~graph.messages.Action`); experience map on the
+(``on_odometry``, returning the :class:`~torchratslam.graph.messages.Action`); experience map on the
 odometry, then ``apply(action, ...)`` and ``iterate()`` (relaxation).
 
 The pipelined mode (``pipelined=True``) runs the reader + odometry + local view, the
@@ -32,7 +32,7 @@ order, so the map is identical to the sequential mode's.
 Example:
     >>> from torchratslam import load_config  # doctest: +SKIP
     >>> from torchratslam.pipeline import RatSLAM  # doctest: +SKIP
-    >>> from torchratslam.readers import open_data  # doctest: +SKIP
+    >>> from torchratslam.readers.datasets import open_data  # doctest: +SKIP
     >>> slam = RatSLAM(load_config("virtual_tour"))  # doctest: +SKIP
     >>> result = slam.run(open_data("sim:virtual_tour"), max_frames=500)  # doctest: +SKIP
 """
@@ -51,13 +51,13 @@ from typing import Any
 import numpy as np
 import torch
 
-from graph.errors import ConfigError, InputError
-from graph.messages import Action
 from torchratslam.config import RatSLAMConfig, VisualOdometryParams
+from torchratslam.graph.errors import ConfigError, InputError
+from torchratslam.graph.messages import Action
 from torchratslam.messages import Frame, ViewMatch
+from torchratslam.readers.visual_odometry import GivenOdometry, VisualOdometry
 from torchratslam.registry import EXPERIENCE_MAPS, LOCAL_VIEWS, ODOMETRY, POSE_CELLS, Registry
 from torchratslam.timing import TimeLogger
-from torchratslam.visual_odometry import GivenOdometry, VisualOdometry
 
 __all__ = ["QUEUE_SIZE", "RatSLAM", "RunResult", "StepResult"]
 
@@ -67,7 +67,7 @@ QUEUE_SIZE = 10
 
 # ----------------------------------------------------------------------------- defaults
 def _experience_map_factory(params: Any) -> Any:
-    from graph.experience_map import ExperienceMap
+    from torchratslam.graph.experience_map import ExperienceMap
 
     return ExperienceMap(params)
 
@@ -87,7 +87,7 @@ if "given" not in ODOMETRY:
 if "visual" not in ODOMETRY:
     ODOMETRY.register("visual", _visual_odometry)
 
-_DEFAULT_MODULES = ("torchratslam.local_view", "torchratslam.pose_cells")
+_DEFAULT_MODULES = ("torchratslam.local_view.view", "torchratslam.pose_cells.network")
 
 
 def _load_default_modules() -> None:
@@ -607,7 +607,7 @@ class RatSLAM:
         Returns:
             The ATE, or None when there is no ground truth.
         """
-        from torchratslam.eval import ate_rmse, interpolate_groundtruth
+        from torchratslam.eval.metrics import ate_rmse, interpolate_groundtruth
 
         traj = self.trajectory()
         if traj.shape[0] < 2:
@@ -622,7 +622,7 @@ class RatSLAM:
 
     def dead_reckoning_ate(self, groundtruth: np.ndarray | None = None) -> float | None:
         """ATE (m) of the integrated odometry alone (the baseline a map must beat)."""
-        from torchratslam.eval import ate_rmse, dead_reckoning, interpolate_groundtruth
+        from torchratslam.eval.metrics import ate_rmse, dead_reckoning, interpolate_groundtruth
 
         odo = self.odometry_log()
         if odo.shape[0] < 2:

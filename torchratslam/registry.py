@@ -13,7 +13,7 @@ from __future__ import annotations
 from collections.abc import Callable, Iterator
 from typing import Any, TypeVar
 
-from graph.errors import ConfigError, unknown_name_message
+from torchratslam.graph.errors import ConfigError, unknown_name_message
 
 T = TypeVar("T")
 

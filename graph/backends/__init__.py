@@ -17,17 +17,16 @@ from __future__ import annotations
 from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
-
-from graph.backends.alpha import AlphaBackend, AlphaReferenceBackend
-from graph.backends.gtsam_backend import (
+from torchratslam.graph.backends.alpha import AlphaBackend, AlphaReferenceBackend
+from torchratslam.graph.backends.gtsam_backend import (
     GraphErrorEvaluator,
     GtsamBackend,
     ISAM2Backend,
     factor_graph,
     graph_error,
 )
-from graph.errors import ConfigError, unknown_name_message
-from graph.posegraph import PoseGraph
+from torchratslam.graph.errors import ConfigError, unknown_name_message
+from torchratslam.graph.posegraph import PoseGraph
 
 
 @runtime_checkable

@@ -44,9 +44,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
-
-from graph.errors import ConfigError
-from graph.posegraph import TWO_PI, PoseGraph
+from torchratslam.graph.errors import ConfigError
+from torchratslam.graph.posegraph import TWO_PI, PoseGraph
 
 
 def _check(passes: int, correction: float) -> None:

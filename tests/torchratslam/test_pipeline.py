@@ -6,8 +6,8 @@ import math
 import numpy as np
 import pytest
 import torch
+from torchratslam.graph.messages import Action, ActionKind
 
-from graph.messages import Action, ActionKind
 from torchratslam.config import RatSLAMConfig
 from torchratslam.errors import ConfigError, InputError
 from torchratslam.messages import Frame, ViewMatch
@@ -94,7 +94,7 @@ def _frames(n, seed=0):
 
 
 def _fake_slam(log, **kw):
-    from graph.experience_map import ExperienceMap
+    from torchratslam.graph.experience_map import ExperienceMap
 
     class LoggingMap(ExperienceMap):
         def on_odometry(self, vtrans, vrot, dt):
@@ -279,7 +279,7 @@ def sequential_run(loop_frames):
 
 
 def test_end_to_end_the_loop_closes(sequential_run, loop_frames):
-    from torchratslam.eval import ate_rmse, dead_reckoning
+    from torchratslam.eval.metrics import ate_rmse, dead_reckoning
 
     slam, result = sequential_run
     assert result.frames == len(loop_frames) == slam.frame_index
@@ -337,7 +337,7 @@ def test_remap_experiences_repoints_the_history():
 
 
 def test_step_with_visual_odometry_estimates_the_turn():
-    from torchratslam.visual_odometry import VisualOdometry
+    from torchratslam.readers.visual_odometry import VisualOdometry
 
     cfg = RatSLAMConfig().replace(camera_fov_deg=360.0, camera_hz=2.0)
     slam = RatSLAM(
@@ -357,8 +357,8 @@ def test_same_input_and_config_give_the_same_map(tmp_path):
     """Determinism end to end: frames re-simulated from the seed, two fresh systems, the
     same templates, activity, experience poses, links and saved state, bit for bit."""
     from torchratslam.config import load_config
+    from torchratslam.maps.state import load_state, save_state
     from torchratslam.sim import get_tour
-    from torchratslam.state import load_state, save_state
 
     runs = []
     for k in range(2):

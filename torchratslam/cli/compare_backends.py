@@ -11,12 +11,12 @@ from typing import Any
 
 import numpy as np
 
-from graph.errors import InputError
+from torchratslam.graph.errors import InputError
 
 DESCRIPTION = """Relax one pose graph with several backends and print a table of time,
 final error and (with ground truth) ATE per backend.
 
-MAP is a g2o or TORO pose-graph file (read with graph.io.read_posegraph), or a saved
+MAP is a g2o or TORO pose-graph file (read with torchratslam.graph.io.read_posegraph), or a saved
 RatSLAM state (a state directory, a run's OUT directory containing state/, or a
 reference-format map): its experience map is turned into a pose graph (link
 (d, heading, facing) -> dx = d cos(heading), dy = d sin(heading), dth = facing)."""
@@ -75,7 +75,7 @@ def register(subparsers: Any) -> argparse.ArgumentParser:
 
 def posegraph_from_state(state: Any) -> Any:
     """The pose graph of a saved map's experience map (a ``MapState``)."""
-    from graph.posegraph import PoseGraph
+    from torchratslam.graph.posegraph import PoseGraph
 
     poses = np.asarray(state.exp_pose, dtype=np.float64).reshape(-1, 3)
     src = np.asarray(state.link_from, dtype=np.int64)
@@ -94,10 +94,10 @@ def load_posegraph(path: str | Path) -> Any:
     if not p.exists():
         raise InputError(f"--map {str(path)!r}: not found; give a .g2o/TORO file or a saved state")
     if p.is_file() and p.suffix.lower() in (".g2o", ".graph", ".txt", ".toro"):
-        from graph.io import read_posegraph
+        from torchratslam.graph.io import read_posegraph
 
         return read_posegraph(p)
-    from torchratslam.state import load_state
+    from torchratslam.maps.state import load_state
 
     return posegraph_from_state(load_state(p))
 
@@ -120,7 +120,7 @@ def format_table(rows: list[dict[str, Any]]) -> str:
 
 
 def main(args: argparse.Namespace) -> int:
-    from graph.compare import compare_backends
+    from torchratslam.graph.compare import compare_backends
 
     names = tuple(s.strip() for s in args.backends.split(",") if s.strip())
     if not names:
@@ -128,7 +128,7 @@ def main(args: argparse.Namespace) -> int:
     pg = load_posegraph(args.map)
     gt = None
     if args.groundtruth:
-        from graph.io import read_poses
+        from torchratslam.graph.io import read_poses
 
         gt = read_poses(args.groundtruth)
         n = np.asarray(pg.poses).shape[0]

@@ -16,8 +16,8 @@ from typing import Any
 
 import numpy as np
 
-from graph.errors import ConfigError, InputError
-from graph.io import atomic_write_text
+from torchratslam.graph.errors import ConfigError, InputError
+from torchratslam.graph.io import atomic_write_text
 from torchratslam.messages import Frame
 
 # parameter presets: the paper's Table 3 values, and those used for the results in
@@ -204,7 +204,7 @@ def main(args: argparse.Namespace) -> int:
     """Run the subcommand."""
     import torch
 
-    from torchratslam.mbaram import MBARAMParams, run_mbaram
+    from torchratslam.mbaram.model import MBARAMParams, run_mbaram
 
     if args.laps < 1 or args.loc_laps < 0:
         raise ConfigError("--laps must be >= 1 and --loc-laps >= 0")

@@ -2,7 +2,7 @@
 
 The partial map's current (last) template is matched against the loaded map's
 templates with the local view's matcher; if the best match is under
-``vt_match_threshold`` the maps are merged (:func:`torchratslam.merge.merge_maps`) and the
+``vt_match_threshold`` the maps are merged (:func:`torchratslam.maps.merge.merge_maps`) and the
 result is written to ``--out``, in the native format or the reference implementation's
 text format. Either input may be a native map, a run's OUT directory, or a
 reference-format directory.
@@ -17,8 +17,8 @@ from typing import Any
 import numpy as np
 import torch
 
-from graph.errors import GraphError
 from torchratslam.config import load_config
+from torchratslam.graph.errors import GraphError
 
 
 def register(subparsers: Any) -> argparse.ArgumentParser:
@@ -62,8 +62,8 @@ def match_last_template(loaded: Any, partial: Any, config: Any) -> tuple[int, fl
         GraphError: the partial map is empty or no loaded template is under
             ``vt_match_threshold``.
     """
-    from torchratslam.local_view import LocalView
-    from torchratslam.merge import pick_experience
+    from torchratslam.local_view.view import LocalView
+    from torchratslam.maps.merge import pick_experience
 
     if partial.n_templates == 0 or loaded.n_templates == 0:
         raise GraphError("both maps need at least one template to be merged")
@@ -88,9 +88,9 @@ def match_last_template(loaded: Any, partial: Any, config: Any) -> tuple[int, fl
 
 
 def main(args: argparse.Namespace) -> int:
-    from torchratslam.merge import merge_maps
-    from torchratslam.reference_format import write_reference
-    from torchratslam.state import apply_experience_map, load_state, save_map
+    from torchratslam.maps.merge import merge_maps
+    from torchratslam.maps.reference_format import write_reference
+    from torchratslam.maps.state import apply_experience_map, load_state, save_map
 
     config = load_config(args.config)
     loaded = load_state(args.loaded, config)

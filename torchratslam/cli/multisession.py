@@ -78,7 +78,7 @@ TOUR_CONFIG = {"virtual_tour": "virtual_tour", "lab_tour": "lab_tour", "irat_lik
 
 
 def _tour_name(spec: str) -> str:
-    from graph.errors import InputError
+    from torchratslam.graph.errors import InputError
 
     name = spec.removeprefix("sim:")
     if "/" in name:
@@ -328,7 +328,7 @@ def run(
     Returns:
         ``run_tour``'s result (``report`` and ``data``).
     """
-    from torchratslam.multisession import run_tour
+    from torchratslam.multisession.session import run_tour
     from torchratslam.sim import get_tour
 
     name = _tour_name(tour_spec)
@@ -362,7 +362,7 @@ def run(
 
 
 def main(args: argparse.Namespace) -> int:
-    from graph.errors import ConfigError
+    from torchratslam.graph.errors import ConfigError
 
     backends = tuple(b.strip() for b in args.backends.split(",") if b.strip())
     overrides = {}

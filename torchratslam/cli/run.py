@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from graph.errors import ConfigError, InputError
+from torchratslam.graph.errors import ConfigError, InputError
 
 DESCRIPTION = """Run RatSLAM on a dataset.
 
@@ -24,7 +24,7 @@ mean/median ms per frame, ate_rmse_m when there is ground truth), experiences.cs
 (id,x,y,th,created_frame; final poses), trajectory.csv (frame,t,experience_id,x,y,th:
 the experience current after each frame, with its final pose), map.png,
 pose_cells.png and the saved map state in OUT/state (load it with --load or
-torchratslam.state.load_state)."""
+torchratslam.maps.state.load_state)."""
 
 EPILOG = """examples:
   torchratslam run --config configs/virtual_tour.yaml --data sim:virtual_tour --out out/vt
@@ -157,7 +157,7 @@ def _mirrored(data: Any) -> bool:
 
 def _topics(args: argparse.Namespace, config: Any) -> tuple[str, str]:
     """Bag topics: the options, else the config's ``topic_root``, else the iRat's."""
-    from torchratslam.readers import IRAT_IMAGE_TOPIC, IRAT_ODOM_TOPIC
+    from torchratslam.readers.datasets import IRAT_IMAGE_TOPIC, IRAT_ODOM_TOPIC
 
     root = str(getattr(config.general, "topic_root", "") or "").strip("/")
     image = args.image_topic or (f"/{root}/camera/image/compressed" if root else IRAT_IMAGE_TOPIC)
@@ -212,8 +212,8 @@ def write_outputs(
 ) -> dict[str, Any]:
     """Write metrics.json, experiences.csv, trajectory.csv, map.png, pose_cells.png and
     state/ for a finished run. Returns the metrics."""
-    from torchratslam.eval import interpolate_groundtruth
-    from torchratslam.plots import plot_map, plot_pose_cells
+    from torchratslam.eval.metrics import interpolate_groundtruth
+    from torchratslam.viz.plots import plot_map, plot_pose_cells
 
     out.mkdir(parents=True, exist_ok=True)
     em = slam.experience_map
@@ -273,7 +273,7 @@ def write_outputs(
     )
     centres = slam.pc_log() if hasattr(slam, "pc_log") else None
     plot_pose_cells(out / "pose_cells.png", slam.activity, centres=centres)
-    from torchratslam.state import save_state
+    from torchratslam.maps.state import save_state
 
     save_state(slam, out / "state")
     _atomic_text(out / "metrics.json", json.dumps(metrics, indent=2, default=_json_default) + "\n")
@@ -297,7 +297,7 @@ def main(args: argparse.Namespace) -> int:
 
     from torchratslam.config import load_config
     from torchratslam.pipeline import RatSLAM
-    from torchratslam.readers import open_data
+    from torchratslam.readers.datasets import open_data
 
     if args.threads < 1:
         raise InputError(f"--threads must be >= 1, got {args.threads}")
@@ -319,7 +319,7 @@ def main(args: argparse.Namespace) -> int:
     odometry: Any = None  # the config's choice (default: the data's odometry)
     odometry_label = None
     if args.visual_odometry or not getattr(data, "has_odometry", True):
-        from torchratslam.visual_odometry import VisualOdometry
+        from torchratslam.readers.visual_odometry import VisualOdometry
 
         odometry = VisualOdometry(config.visual_odometry, mirrored=_mirrored(data))
         odometry_label = "visual"
@@ -335,8 +335,8 @@ def main(args: argparse.Namespace) -> int:
     device = torch.device(args.device) if args.device else None
     kwargs: dict[str, Any] = {"odometry": odometry, "device": device, "pipelined": args.pipelined}
     if args.load:
-        from torchratslam.multisession import MultiSessionRatSLAM
-        from torchratslam.state import load_state
+        from torchratslam.maps.state import load_state
+        from torchratslam.multisession.session import MultiSessionRatSLAM
 
         stored = [load_state(p) for p in args.load]
         slam = MultiSessionRatSLAM(config, stored, **kwargs)

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import yaml
 
-from graph.errors import InputError
+from torchratslam.graph.errors import InputError
 
 HELP = "write a simulated tour (sim:NAME) as a dataset directory (frames/, odometry.csv, ...)"
 

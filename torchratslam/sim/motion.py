@@ -21,7 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from graph.errors import InputError
+from torchratslam.graph.errors import InputError
 
 __all__ = ["OdometryNoise", "Route", "integrate_odometry", "odometry_from_poses"]
 

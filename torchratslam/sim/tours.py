@@ -42,7 +42,7 @@ from typing import Any
 
 import numpy as np
 
-from graph.errors import InputError, unknown_name_message
+from torchratslam.graph.errors import InputError, unknown_name_message
 from torchratslam.messages import Frame
 from torchratslam.sim.laser import Laser, scan
 from torchratslam.sim.motion import (

@@ -1,0 +1,1 @@
+"""The shipped configuration presets (YAML), installed as package data."""

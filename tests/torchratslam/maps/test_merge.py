@@ -1,0 +1,376 @@
+"""Merge arithmetic (Eqs. 9-17) on small hand-made maps with a known answer."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from torchratslam.errors import GraphError, MapFormatError
+from torchratslam.maps.merge import merge_maps, pc_distance, pick_experience, shift_activity
+from torchratslam.maps.state import MapState
+
+DIMS = (9, 9, 12)  # x, y, th rings
+CONFIG = {"pc_dim_xy": 9, "pc_dim_th": 12, "template_x_size": 4, "template_y_size": 2}
+
+
+def wrap(a):
+    return (np.asarray(a) + np.pi) % (2 * np.pi) - np.pi
+
+
+def links_for(poses, pairs):
+    """RatSLAM link geometry (d, heading, facing relative to the source heading)."""
+    rows = []
+    for a, b in pairs:
+        dx, dy = poses[b, :2] - poses[a, :2]
+        rows.append(
+            (
+                a,
+                b,
+                math.hypot(dx, dy),
+                wrap(math.atan2(dy, dx) - poses[a, 2]),
+                wrap(poses[b, 2] - poses[a, 2]),
+                1.0 + a,
+            )
+        )
+    return np.array(rows, dtype=np.float64).reshape(-1, 6)
+
+
+def link_residual(state):
+    """Max disagreement between each link's prediction and the target pose."""
+    p, out = state.exp_pose, 0.0
+    for k in range(state.n_links):
+        a, b = state.link_from[k], state.link_to[k]
+        ang = p[a, 2] + state.link_heading[k]
+        pred = p[a, :2] + state.link_d[k] * np.array([math.cos(ang), math.sin(ang)])
+        out = max(
+            out,
+            float(np.abs(pred - p[b, :2]).max()),
+            abs(float(wrap(p[a, 2] + state.link_facing[k] - p[b, 2]))),
+        )
+    return out
+
+
+def make_map(poses, pcs, tpl_of_exp, templates, tpl_pc, pairs, activity=None, current=None):
+    lk = links_for(poses, pairs)
+    n, m = len(templates), len(poses)
+    return MapState(
+        config=dict(CONFIG),
+        templates=np.asarray(templates, np.float64).reshape(n, 2, 4),
+        template_mean=np.asarray(templates, np.float64).reshape(n, -1).mean(1),
+        template_frame=np.arange(n, dtype=np.int64),
+        template_pc=np.asarray(tpl_pc, np.float64).reshape(n, 3),
+        template_decay=np.linspace(1.0, 2.0, n),
+        exp_pose=np.asarray(poses, np.float64).reshape(m, 3),
+        exp_pc=np.asarray(pcs, np.float64).reshape(m, 3),
+        exp_template=np.asarray(tpl_of_exp, np.int64),
+        exp_frame=np.arange(m, dtype=np.int64) * 3,
+        exp_t=np.arange(m, dtype=np.float64) * 0.5,
+        link_from=lk[:, 0].astype(np.int64),
+        link_to=lk[:, 1].astype(np.int64),
+        link_d=lk[:, 2],
+        link_heading=lk[:, 3],
+        link_facing=lk[:, 4],
+        link_dt=lk[:, 5],
+        activity=np.zeros((12, 9, 9)) if activity is None else activity,
+        current_vt=n - 1,
+        prev_vt=max(n - 2, -1),
+        current_exp=m - 1 if current is None else current,
+        prev_exp=max(m - 2, -1),
+        frame_index=40,
+        extra={"exp:count": np.arange(m, dtype=np.int64) + 100, "pc:flag": np.array([m])},
+        scalars={"session": m},
+    ).validate()
+
+
+def world(rng, n):
+    """A world trajectory: n poses, pose-cell coordinates, one template per experience."""
+    th = np.cumsum(rng.uniform(-0.6, 0.6, n))
+    xy = np.cumsum(np.c_[np.cos(th), np.sin(th)] * rng.uniform(0.5, 1.5, (n, 1)), axis=0)
+    poses = np.c_[xy, wrap(th)]
+    pcs = np.mod(np.c_[xy * 0.8, th / (2 * np.pi) * DIMS[2]] + 3.3, DIMS)
+    templates = rng.uniform(0, 1, (n, 8))
+    return poses, pcs, templates
+
+
+def split(rng, n_l=7, n_p=6, frame=(0.7, -4.0, 2.5), pc_off=(5.4, 7.9, 10.5)):
+    """Loaded map = world experiences 0..n_l-1; partial map = a stretch of the world
+    ending at world experience 2 (the place both maps share), expressed in another frame
+    and with other pose-cell coordinates. Returns (loaded, partial, world data)."""
+    poses, pcs, templates = world(rng, n_l + n_p)
+    lidx = np.arange(n_l)
+    pidx = np.r_[np.arange(n_l, n_l + n_p - 1), 2]  # the partial map ends at world exp 2
+    loaded = make_map(
+        poses[lidx],
+        pcs[lidx],
+        np.arange(n_l),
+        templates[lidx],
+        pcs[lidx],
+        [(i, i + 1) for i in range(n_l - 1)] + [(n_l - 1, 0)],
+    )
+    dth, tx, ty = frame
+    c, s = math.cos(dth), math.sin(dth)
+    pp = poses[pidx].copy()
+    pp[:, :2] = pp[:, :2] @ np.array([[c, s], [-s, c]]) + [tx, ty]
+    pp[:, 2] = wrap(pp[:, 2] + dth)
+    ppc = np.mod(pcs[pidx] - pc_off, DIMS)
+    act = np.zeros((12, 9, 9))
+    z = np.rint(ppc[-1]).astype(int) % np.array(DIMS)
+    act[z[2], z[1], z[0]] = 1.0
+    partial = make_map(
+        pp,
+        ppc,
+        np.arange(n_p),
+        templates[pidx],
+        ppc,
+        [(i, i + 1) for i in range(n_p - 1)] + [(0, 2)],
+        activity=act,
+    )
+    return loaded, partial, (poses, pcs, pidx)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_known_transform_and_pc_shift_are_recovered(seed):
+    rng = np.random.default_rng(seed)
+    loaded, partial, (poses, pcs, pidx) = split(rng)
+    res = merge_maps(loaded, partial, loaded_template=2)
+    m = res.state
+    n_l, n_p = loaded.n_experiences, partial.n_experiences
+    # every partial experience lands on its world pose (the frame change is undone)
+    got = m.exp_pose[n_l:]
+    want = poses[pidx[:-1]]
+    assert np.allclose(got[:, :2], want[:, :2], atol=1e-9)
+    assert np.allclose(wrap(got[:, 2] - want[:, 2]), 0, atol=1e-9)
+    # and on its world pose-cell coordinates, with wrap-around
+    d = pc_distance(m.exp_pc[n_l:], pcs[pidx[:-1]], DIMS)
+    assert d.max() < 1e-9
+    assert np.all((m.exp_pc >= 0) & (m.exp_pc < np.array(DIMS)))
+    assert pc_distance(m.template_pc[loaded.n_templates :], pcs[pidx[:-1]], DIMS).max() < 1e-9
+    # the links are still satisfied by the poses, including the re-pointed ones
+    assert link_residual(m) < 1e-9
+    assert m.n_experiences == n_l + n_p - 1 and m.n_templates == n_l + n_p - 1
+    assert m.n_links == loaded.n_links + partial.n_links
+    assert res.info["loaded_exp"] == 2 and res.info["partial_exp"] == n_p - 1
+    # the transform maps e_z onto e_u exactly
+    assert np.allclose(res.transform_poses(partial.exp_pose[-1])[:2], loaded.exp_pose[2, :2])
+
+
+def test_pose_cell_shift_wraps_and_activity_moves_to_the_loaded_packet():
+    rng = np.random.default_rng(11)
+    loaded, partial, _ = split(rng, pc_off=(8.6, 0.4, 11.7))
+    u = loaded.template_pc[2]
+    res = merge_maps(loaded, partial, 2)
+    delta = np.array(res.info["pc_shift"])
+    assert np.allclose(delta, u - partial.template_pc[-1])
+    # brute-force modular shift, axis by axis
+    for i in range(partial.n_templates - 1):
+        for ax in range(3):
+            want = partial.template_pc[i, ax] + delta[ax]
+            while want < 0:
+                want += DIMS[ax]
+            while want >= DIMS[ax]:
+                want -= DIMS[ax]
+            assert res.state.template_pc[loaded.n_templates + i, ax] == pytest.approx(want)
+    peak = np.unravel_index(np.argmax(res.state.activity), res.state.activity.shape)
+    th, y, x = peak
+    assert pc_distance(np.array([x, y, th]), u, DIMS) <= math.sqrt(3 * 0.5**2) + 1e-9
+    assert res.state.activity.sum() == pytest.approx(partial.activity.sum())
+
+
+def test_shift_activity_matches_a_brute_force_roll():
+    rng = np.random.default_rng(3)
+    a = rng.random((12, 9, 9))
+    out = shift_activity(a, np.array([-3.2, 10.6, 5.0]))  # rounds to (-3, 11, 5)
+    for th in range(12):
+        for y in range(9):
+            for x in range(9):
+                assert out[(th + 5) % 12, (y + 11) % 9, (x - 3) % 9] == a[th, y, x]
+
+
+def reference_merge(loaded, partial, u, e_u, rel=0.0):
+    """A plain loop re-implementation of Eqs. 9-17, for comparison."""
+    z, e_z = partial.n_templates - 1, partial.n_experiences - 1
+    n_vl, n_el = loaded.n_templates, loaded.n_experiences
+    tmap = {i: (n_vl + i if i < z else u) for i in range(partial.n_templates)}
+    emap = {j: (n_el + j if j < e_z else e_u) for j in range(partial.n_experiences)}
+    delta = [loaded.template_pc[u][k] - partial.template_pc[z][k] for k in range(3)]
+    dth = loaded.exp_pose[e_u, 2] - partial.exp_pose[e_z, 2] + rel
+    exps, links = [], []
+    for j in range(partial.n_experiences):
+        if j == e_z:
+            continue
+        x, y, th = partial.exp_pose[j]
+        ox, oy = x - partial.exp_pose[e_z, 0], y - partial.exp_pose[e_z, 1]
+        nx = math.cos(dth) * ox - math.sin(dth) * oy + loaded.exp_pose[e_u, 0]
+        ny = math.sin(dth) * ox + math.cos(dth) * oy + loaded.exp_pose[e_u, 1]
+        pc = [(partial.exp_pc[j][k] + delta[k]) % DIMS[k] for k in range(3)]
+        exps.append((nx, ny, wrap(th + dth), *pc, tmap[int(partial.exp_template[j])]))
+    for k in range(partial.n_links):
+        links.append(
+            (
+                emap[int(partial.link_from[k])],
+                emap[int(partial.link_to[k])],
+                partial.link_d[k],
+                partial.link_heading[k],
+                partial.link_facing[k],
+            )
+        )
+    return np.array(exps), np.array(links)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_vectorised_merge_equals_a_loop_reference(seed):
+    rng = np.random.default_rng(100 + seed)
+    loaded, partial, _ = split(rng, n_l=5 + seed, n_p=4 + seed)
+    rel = float(rng.uniform(-1, 1))
+    res = merge_maps(loaded, partial, 2, relative_rad=rel)
+    exps, links = reference_merge(loaded, partial, 2, 2, rel)
+    m, n_el = res.state, loaded.n_experiences
+    got = np.c_[m.exp_pose[n_el:], m.exp_pc[n_el:], m.exp_template[n_el:]]
+    assert np.allclose(got, exps, atol=1e-12)
+    gl = np.c_[m.link_from, m.link_to, m.link_d, m.link_heading, m.link_facing][loaded.n_links :]
+    assert np.allclose(gl, links)
+    # loaded part untouched, partial templates appended in order, the last one dropped
+    assert np.array_equal(m.exp_pose[:n_el], loaded.exp_pose)
+    assert np.array_equal(m.templates[: loaded.n_templates], loaded.templates)
+    assert np.array_equal(m.templates[loaded.n_templates :], partial.templates[:-1])
+    assert np.array_equal(m.template_decay[loaded.n_templates :], partial.template_decay[:-1])
+    assert np.array_equal(m.exp_frame[n_el:], partial.exp_frame[:-1])
+    # per-experience extras concatenated, session extras and scalars from the partial map
+    assert np.array_equal(
+        m.extra["exp:count"], np.r_[loaded.extra["exp:count"], partial.extra["exp:count"][:-1]]
+    )
+    assert np.array_equal(m.extra["pc:flag"], partial.extra["pc:flag"])
+    assert m.scalars == partial.scalars and m.frame_index == partial.frame_index
+    # current ids follow the robot: it stands at the loaded match
+    assert m.current_exp == 2 and m.current_vt == 2
+    assert m.prev_exp == n_el + partial.n_experiences - 2
+    m.validate()
+
+
+def test_the_ablation_keeps_partial_associations_but_moves_the_activity():
+    rng = np.random.default_rng(5)
+    loaded, partial, _ = split(rng)
+    res = merge_maps(loaded, partial, 2, shift_pose_cells=False)
+    m = res.state
+    assert np.array_equal(m.template_pc[loaded.n_templates :], partial.template_pc[:-1])
+    assert np.array_equal(m.exp_pc[loaded.n_experiences :], partial.exp_pc[:-1])
+    shifted = merge_maps(loaded, partial, 2).state
+    assert np.array_equal(m.activity, shifted.activity)
+    assert np.array_equal(m.exp_pose, shifted.exp_pose)
+
+
+def test_first_view_match_continues_in_the_loaded_map():
+    """Scenario (i): a one-template, one-experience partial map adds nothing."""
+    rng = np.random.default_rng(2)
+    loaded, _, _ = split(rng)
+    partial = make_map(
+        np.array([[3.0, 1.0, 0.2]]),
+        np.array([[4.0, 4.0, 6.0]]),
+        [0],
+        rng.random((1, 8)),
+        np.array([[4.0, 4.0, 6.0]]),
+        [],
+    )
+    res = merge_maps(loaded, partial, 4)
+    m = res.state
+    assert m.summary() == loaded.summary()
+    assert m.current_exp == 4 and m.current_vt == 4
+    assert np.array_equal(m.exp_pose, loaded.exp_pose)
+
+
+def test_picks_the_experience_nearest_in_pose_cells():
+    rng = np.random.default_rng(8)
+    loaded, partial, _ = split(rng)
+    loaded.exp_template[5] = 2  # template 2 now has experiences 2 and 5
+    loaded.exp_pc[5] = loaded.template_pc[2] + [0.2, 0, 0]
+    loaded.exp_pc[2] = np.mod(loaded.template_pc[2] + [3, 0, 0], DIMS)
+    assert pick_experience(loaded, 2) == 5
+    assert merge_maps(loaded, partial, 2).info["loaded_exp"] == 5
+    assert pick_experience(loaded, 99 % loaded.n_templates) in range(loaded.n_experiences)
+
+
+def test_bad_requests_are_clear_errors():
+    rng = np.random.default_rng(9)
+    loaded, partial, _ = split(rng)
+    with pytest.raises(GraphError, match="loaded template 99"):
+        merge_maps(loaded, partial, 99)
+    loaded.exp_template[:] = 0
+    with pytest.raises(GraphError, match="no experience"):
+        merge_maps(loaded, partial, 3)
+    other = partial.copy()
+    other.config = {**CONFIG, "pc_dim_xy": 21}
+    with pytest.raises(MapFormatError, match="pc_dim_xy = 9 in the map but 21"):
+        merge_maps(loaded, other, 2)
+
+
+def _cli_maps(tmp_path, *, match=True):
+    from torchratslam.maps.state import save_map
+
+    rng = np.random.default_rng(21)
+    loaded, partial, _ = split(rng)
+    if not match:
+        partial.templates[-1] = 1.0 - loaded.templates[2]
+    cfg = tmp_path / "c.yaml"
+    cfg.write_text(
+        "pc_dim_xy: 9\npc_dim_th: 12\ntemplate_x_size: 4\ntemplate_y_size: 2\n"
+        "vt_shift_match: 0\nvt_step_match: 1\nvt_match_threshold: 0.01\n"
+    )
+    save_map(loaded, tmp_path / "loaded")
+    save_map(partial, tmp_path / "partial")
+    return loaded, partial, cfg
+
+
+@pytest.mark.parametrize("fmt", ["native", "reference"])
+def test_cli_merge_writes_the_merged_map(tmp_path, capsys, fmt):
+    from torchratslam.cli import main
+    from torchratslam.maps.state import load_state
+
+    loaded, partial, cfg = _cli_maps(tmp_path)
+    code = main(
+        [
+            "merge",
+            "--config",
+            str(cfg),
+            "--loaded",
+            str(tmp_path / "loaded"),
+            "--partial",
+            str(tmp_path / "partial"),
+            "--out",
+            str(tmp_path / "m"),
+            "--format",
+            fmt,
+        ]
+    )
+    assert code == 0
+    assert '"loaded_template": 2' in capsys.readouterr().out
+    from torchratslam.config import load_config
+
+    got = load_state(tmp_path / "m", load_config(cfg))
+    want = merge_maps(loaded, partial, 2).state
+    assert got.n_experiences == want.n_experiences and got.n_templates == want.n_templates
+    assert np.allclose(got.exp_pose, want.exp_pose) and np.allclose(got.exp_pc, want.exp_pc)
+    assert np.array_equal(got.link_from, want.link_from)
+
+
+def test_cli_merge_without_a_match_is_an_error_and_writes_nothing(tmp_path, capsys):
+    from torchratslam.cli import main
+
+    _, _, cfg = _cli_maps(tmp_path, match=False)
+    code = main(
+        [
+            "merge",
+            "--config",
+            str(cfg),
+            "--loaded",
+            str(tmp_path / "loaded"),
+            "--partial",
+            str(tmp_path / "partial"),
+            "--out",
+            str(tmp_path / "m"),
+        ]
+    )
+    assert code == 2
+    assert "matches no loaded template" in capsys.readouterr().err
+    assert not (tmp_path / "m").exists()

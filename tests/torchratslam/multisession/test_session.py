@@ -1,0 +1,194 @@
+"""Multisession mapping end to end on the simulated virtual tour, exact save/load
+continuation, and the multisession CLI."""
+
+from __future__ import annotations
+
+import json
+
+import networkx as nx
+import numpy as np
+import pytest
+import torch
+
+from torchratslam.config import load_config
+from torchratslam.maps.state import apply_state, load_state, save_state, state_from_slam
+from torchratslam.multisession.session import MultiSessionRatSLAM
+from torchratslam.pipeline import RatSLAM
+from torchratslam.sim import get_tour
+
+torch.set_num_threads(1)
+
+# the shipped virtual-tour config, unmodified (the paper's Table 1: vt_step_match 2)
+CONFIG = load_config("virtual_tour")
+
+
+@pytest.fixture(scope="module")
+def tour():
+    return get_tour("virtual_tour")
+
+
+@pytest.fixture(scope="module")
+def session1_map(tour):
+    slam = RatSLAM(CONFIG)
+    slam.run(tour.sessions[0].frames(), progress=False)
+    return state_from_slam(slam)
+
+
+LAP2 = 175  # into the second lap: past session 1's path, the unmapped stretch and the
+# start of session 2 (the partial map's region), where unshifted associations show
+
+
+@pytest.fixture(scope="module")
+def session2(tour, session1_map):
+    return run_session2(tour, session1_map, LAP2)
+
+
+def run_session2(tour, stored, frames, **kw):
+    ms = MultiSessionRatSLAM(CONFIG, [stored], session="session2", **kw)
+    counts = []
+    ms.run(
+        tour.sessions[1].frames(0, frames),
+        progress=False,
+        callback=lambda r: counts.append((r.frame, r.templates, r.experiences)),
+    )
+    return ms, np.array(counts)
+
+
+def test_saved_state_continues_exactly_as_if_never_saved(tour, tmp_path):
+    frames = list(tour.sessions[0].frames(0, 50))
+    a = RatSLAM(CONFIG)
+    a.run(frames[:25], progress=False)
+    save_state(a, tmp_path / "run")
+    b = RatSLAM(CONFIG)
+    apply_state(load_state(tmp_path / "run"), b)
+    assert state_from_slam(b).equals(state_from_slam(a))
+    a.run(frames[25:], progress=False)
+    b.run(frames[25:], progress=False)
+    sa, sb = state_from_slam(a), state_from_slam(b)
+    assert sa.n_templates > 10 and sa.n_experiences > 10
+    assert sb.equals(sa)  # bit for bit: activity, templates, poses, links, ids
+    assert np.array_equal(a.trajectory()[25:, 2:], b.trajectory()[:, 2:])
+
+
+@pytest.mark.slow
+def test_session2_merges_with_session1_and_retraverses_without_new_experiences(
+    tour, session1_map, session2
+):
+    ms, counts = session2
+    assert len(ms.merges) == 1
+    m = ms.merges[0]
+    # session 2 reaches session 1's start after about 19 frames
+    assert 15 <= m["frame"] <= 22 and m["scenario"] == "ii" and m["map"] == 0
+    after = counts[counts[:, 0] > m["frame"] + 2]
+    retraverse = after[after[:, 0] < m["frame"] + len(tour.sessions[0]) - 5]
+    # on session 1's path: neither new templates nor new experiences
+    assert retraverse[:, 2].max() == retraverse[:, 2].min()
+    assert retraverse[:, 1].max() == retraverse[:, 1].min()
+    at_end_of_retraverse = retraverse[-1, 2]
+    assert at_end_of_retraverse == session1_map.n_experiences + m["experiences_added"]
+    st = ms.get_map()
+    assert nx.is_weakly_connected(ms.experience_map.graph)
+    # the loaded map's templates are untouched and come first
+    assert np.array_equal(st.templates[: session1_map.n_templates], session1_map.templates)
+    # the trajectory is in the merged map's frame: no frame refers to a dropped id
+    traj = ms.trajectory()
+    assert np.isfinite(traj[:, 3:]).all() and traj[:, 2].max() < st.n_experiences
+
+
+@pytest.mark.slow
+def test_multisession_map_has_as_many_experiences_as_the_continuous_single_session(tour, session2):
+    """The paper's comparison: the same stretch driven in one continuous session (session
+    1, on through the unmapped quarter, then session 2) gives the same number of
+    experiences, within 2 %, and a map of the same shape."""
+    from torchratslam.eval.metrics import icp
+
+    ms, _ = session2
+    cont = tour.continuous()
+    start2 = {p["name"]: p["start"] for p in cont.info["parts"]}["session2"]
+    single = RatSLAM(CONFIG)
+    single.run(cont.frames(0, start2 + LAP2), progress=False)
+    n_single = state_from_slam(single).n_experiences
+    n_multi = ms.get_map().n_experiences
+    assert n_single > 20
+    assert abs(n_multi - n_single) <= 0.02 * n_single
+    m = ms.get_map().exp_pose[:, :2]
+    s = state_from_slam(single).exp_pose[:, :2]
+    lap = tour.routes["ellipse"].length
+    assert icp(m, s).rmse < 0.02 * lap
+
+
+@pytest.mark.slow
+def test_without_the_pose_cell_shift_new_experiences_appear(tour, session1_map, session2):
+    _, c1 = session2
+    plain, c2 = run_session2(tour, session1_map, LAP2, shift_pose_cells=False)
+    assert len(plain.merges) == 1 and not plain.merges[0]["pc_shift_applied"]
+    assert c2[-1, 2] > c1[-1, 2] + 3
+
+
+def test_first_view_in_a_stored_map_continues_there(tour, session1_map):
+    """Scenario (i): the session starts where session 1 started."""
+    ms = MultiSessionRatSLAM(CONFIG, [session1_map], session="again")
+    ms.run(tour.sessions[0].frames(0, 30), progress=False)
+    assert [m["frame"] for m in ms.merges] == [0] and ms.merges[0]["scenario"] == "i"
+    st = ms.get_map()
+    assert st.n_experiences == session1_map.n_experiences
+    assert st.n_templates == session1_map.n_templates
+    assert ms.merges[0]["loaded_exp"] == 0
+
+
+def test_an_incompatible_stored_map_is_refused(session1_map):
+    from torchratslam.errors import MapFormatError
+
+    with pytest.raises(MapFormatError, match="pc_dim_xy = 80 in the map but 40"):
+        MultiSessionRatSLAM(CONFIG.replace(pc_dim_xy=40), [session1_map])
+
+
+@pytest.mark.slow
+def test_multisession_cli_writes_the_report(tmp_path, capsys):
+    from torchratslam.cli import main
+
+    out = tmp_path / "ms"
+    code = main(
+        [
+            "multisession",
+            "--tour",
+            "sim:virtual_tour",
+            "--out",
+            str(out),
+            "--max-frames",
+            "10",
+            "--quiet",
+            "--ablation",
+        ]
+    )
+    assert code == 0
+    rep = json.loads((out / "report.json").read_text())
+    for key in ("single", "single_concatenated", "multi", "ablation_no_pc_shift"):
+        assert {"templates", "experiences", "links", "ate_rmse_m"} <= set(rep[key])
+    assert rep["single_kind"] == "continuous"
+    assert rep["config"]["vt_step_match"] == 2  # the shipped config, unmodified
+    assert "icp_rmse" in rep and isinstance(rep["merges"], list)
+    assert (out / "multi" / "session1" / "state" / "state.json").exists()
+    assert (out / "fig9a_single.png").exists() and (out / "report.md").exists()
+    assert "ICP RMSE" in capsys.readouterr().out
+
+
+@pytest.mark.slow
+def test_two_stored_maps_are_merged_one_after_the_other(tour):
+    """kappa = 2: session 1 split in two separately mapped halves; session 2 meets the
+    first half, then the second, and ends in one connected map."""
+    frames = list(tour.sessions[0].frames())
+    halves = []
+    for part in (frames[:50], frames[56:]):
+        slam = RatSLAM(CONFIG)
+        slam.run(part, progress=False)
+        halves.append(state_from_slam(slam))
+    ms = MultiSessionRatSLAM(CONFIG, halves, names=["first", "second"], session="s2")
+    ms.run(tour.sessions[1].frames(0, 100), progress=False)
+    assert [m["map_name"] for m in ms.merges] == ["first", "second"]
+    assert ms.merges[0]["frame"] < 25 < 19 + 56 - 3 <= ms.merges[1]["frame"] <= 19 + 56 + 5
+    assert ms.pending == [] and nx.is_weakly_connected(ms.experience_map.graph)
+    st = ms.get_map()
+    # every template of both halves is kept, in the merged map's order: second, first, new
+    assert st.n_templates >= halves[0].n_templates + halves[1].n_templates
+    assert np.array_equal(st.templates[: halves[1].n_templates], halves[1].templates)

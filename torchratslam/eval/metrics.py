@@ -1,0 +1,259 @@
+"""Map evaluation: ATE after rigid SE(2) alignment, dead reckoning, and ICP RMSE.
+
+* :func:`align_se2` -- the least-squares rigid motion (rotation + translation, no
+  scale) that maps one 2D point set onto another (Umeyama's closed form in 2D, computed
+  by :func:`torchratslam.graph.geometry.umeyama_se2`, shared with the graph package).
+* :func:`ate_rmse` -- absolute trajectory error: RMSE of the position differences
+  after that alignment.
+* :func:`dead_reckoning` -- integrate (vtrans, vrot, dt) the way the experience map
+  does (heading first, then the step along it), for the "odometry only" baseline.
+* :func:`icp` / :func:`icp_rmse` -- point-to-point ICP between two maps like libicp
+  (which the multisession and xRatSLAM papers used to compare experience maps):
+  nearest neighbours, closed-form rigid update, repeat until the motion is tiny;
+  the RMSE is over the final nearest-neighbour distances.
+
+All functions are numpy-only and deterministic.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from torchratslam.graph.errors import InputError
+from torchratslam.graph.geometry import ate_rmse as _graph_ate_rmse
+from torchratslam.graph.geometry import umeyama_se2
+
+__all__ = [
+    "IcpResult",
+    "align_se2",
+    "apply_se2",
+    "ate_rmse",
+    "dead_reckoning",
+    "icp",
+    "icp_rmse",
+    "interpolate_groundtruth",
+]
+
+
+def _points(a: np.ndarray, name: str) -> np.ndarray:
+    arr = np.asarray(a, dtype=np.float64)
+    if arr.ndim != 2 or arr.shape[1] < 2:
+        raise InputError(
+            f"{name}: expected an (N, 2) or (N, 3) array of poses, got shape {arr.shape}"
+        )
+    if not np.all(np.isfinite(arr[:, :2])):
+        raise InputError(f"{name}: contains NaN or infinite positions; clean the input first")
+    return arr[:, :2]
+
+
+def align_se2(source: np.ndarray, target: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Rigid motion ``(R, t)`` minimising ``sum |R @ s_i + t - d_i|^2`` (no scale).
+
+    Args:
+        source: points to move. Shape: ``(N, 2)`` or ``(N, 3)`` (a third column, the
+            heading, is ignored).
+        target: corresponding points. Shape: same N as ``source``.
+
+    Returns:
+        ``R`` (2, 2) rotation matrix and ``t`` (2,) translation.
+
+    Raises:
+        InputError: shapes differ, fewer than 2 points, or non-finite values.
+    """
+    s = _points(source, "source")
+    d = _points(target, "target")
+    if s.shape[0] != d.shape[0]:
+        raise InputError(f"cannot align {s.shape[0]} points with {d.shape[0]}: counts differ")
+    if s.shape[0] < 2:
+        raise InputError("rigid alignment needs at least 2 corresponding points")
+    angle, t = umeyama_se2(s, d)
+    c, sn = math.cos(angle), math.sin(angle)
+    return np.array([[c, -sn], [sn, c]]), np.asarray(t, dtype=np.float64)
+
+
+def apply_se2(points: np.ndarray, rot: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """Apply ``(R, t)`` to positions; a heading column (if any) is rotated too.
+
+    Shape:
+        points: ``(N, 2)`` or ``(N, 3)``; returns the same shape.
+    """
+    p = np.asarray(points, dtype=np.float64)
+    out = p.copy()
+    out[:, :2] = p[:, :2] @ rot.T + t
+    if p.shape[1] >= 3:
+        dth = math.atan2(rot[1, 0], rot[0, 0])
+        out[:, 2] = np.angle(np.exp(1j * (p[:, 2] + dth)))
+    return out
+
+
+def ate_rmse(estimate: np.ndarray, groundtruth: np.ndarray, *, align: bool = True) -> float:
+    """Absolute trajectory error (metres): RMSE of positions after SE(2) alignment.
+
+    Args:
+        estimate: estimated positions. Shape: ``(N, 2)`` or ``(N, 3)``.
+        groundtruth: true positions at the same instants. Shape: ``(N, 2)`` or ``(N, 3)``.
+        align: align the estimate onto the ground truth first (rigid, no scale).
+
+    Raises:
+        InputError: mismatched counts or non-finite values.
+    """
+    e = _points(estimate, "estimate")
+    g = _points(groundtruth, "groundtruth")
+    if e.shape[0] != g.shape[0]:
+        raise InputError(
+            f"ATE needs one ground-truth pose per estimate: got {e.shape[0]} and {g.shape[0]}"
+        )
+    if e.shape[0] == 0:
+        raise InputError("ATE of an empty trajectory is undefined")
+    if align and e.shape[0] >= 2:
+        return _graph_ate_rmse(e, g)
+    return float(np.sqrt(np.mean(np.sum((e - g) ** 2, axis=1))))
+
+
+def interpolate_groundtruth(groundtruth: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """Ground-truth poses at the times ``t`` (linear; heading interpolated unwrapped).
+
+    Args:
+        groundtruth: rows ``[t, x, y, theta]`` with increasing t. Shape: ``(T, 4)``.
+        t: query times (clamped to the ground truth's time range). Shape: ``(N,)``.
+
+    Returns:
+        ``(N, 3)`` poses ``[x, y, theta]``.
+    """
+    gt = np.asarray(groundtruth, dtype=np.float64)
+    if gt.ndim != 2 or gt.shape[1] < 4 or gt.shape[0] == 0:
+        raise InputError(f"ground truth must be a (T, 4) array [t, x, y, theta], got {gt.shape}")
+    q = np.asarray(t, dtype=np.float64)
+    th = np.unwrap(gt[:, 3])
+    out = np.stack(
+        [
+            np.interp(q, gt[:, 0], gt[:, 1]),
+            np.interp(q, gt[:, 0], gt[:, 2]),
+            np.interp(q, gt[:, 0], th),
+        ],
+        axis=1,
+    )
+    out[:, 2] = np.angle(np.exp(1j * out[:, 2]))
+    return out
+
+
+def dead_reckoning(
+    vtrans: np.ndarray,
+    vrot: np.ndarray,
+    dt: np.ndarray,
+    *,
+    start: tuple[float, float, float] = (0.0, 0.0, 0.0),
+) -> np.ndarray:
+    """Integrate odometry as the experience map does: turn by ``vrot*dt``, then step
+    ``vtrans*dt`` along the new heading.
+
+    Shape:
+        vtrans, vrot, dt: ``(N,)``; returns ``(N, 3)`` poses after each step.
+    """
+    v = np.asarray(vtrans, dtype=np.float64)
+    w = np.asarray(vrot, dtype=np.float64)
+    h = np.asarray(dt, dtype=np.float64)
+    if not (v.shape == w.shape == h.shape) or v.ndim != 1:
+        raise InputError(
+            "vtrans, vrot and dt must be (N,) arrays of one length: "
+            f"{v.shape}, {w.shape}, {h.shape}"
+        )
+    th = start[2] + np.cumsum(w * h)
+    x = start[0] + np.cumsum(v * h * np.cos(th))
+    y = start[1] + np.cumsum(v * h * np.sin(th))
+    return np.stack([x, y, np.angle(np.exp(1j * th))], axis=1)
+
+
+@dataclass(frozen=True)
+class IcpResult:
+    """Result of :func:`icp`.
+
+    Attributes:
+        rotation: (2, 2) rotation applied to the source.
+        translation: (2,) translation applied after the rotation.
+        rmse: RMSE of the nearest-neighbour distances of the aligned source (inliers
+            only when ``max_distance`` was given).
+        iterations: iterations run.
+        aligned: the moved source points, (N, 2).
+    """
+
+    rotation: np.ndarray
+    translation: np.ndarray
+    rmse: float
+    iterations: int
+    aligned: np.ndarray
+
+
+def _nearest(src: np.ndarray, dst: np.ndarray, chunk: int = 2048) -> tuple[np.ndarray, np.ndarray]:
+    """Index of and squared distance to the nearest ``dst`` point of every ``src`` point."""
+    idx = np.empty(src.shape[0], dtype=np.int64)
+    d2 = np.empty(src.shape[0], dtype=np.float64)
+    dst_sq = np.sum(dst**2, axis=1)
+    for a in range(0, src.shape[0], chunk):
+        s = src[a : a + chunk]
+        dist = np.sum(s**2, axis=1)[:, None] - 2.0 * s @ dst.T + dst_sq[None, :]
+        j = np.argmin(dist, axis=1)
+        idx[a : a + chunk] = j
+        d2[a : a + chunk] = np.sum((s - dst[j]) ** 2, axis=1)
+    return idx, d2
+
+
+def icp(
+    source: np.ndarray,
+    target: np.ndarray,
+    *,
+    max_iterations: int = 200,
+    tolerance: float = 1e-10,
+    max_distance: float | None = None,
+    init: tuple[np.ndarray, np.ndarray] | None = None,
+) -> IcpResult:
+    """Point-to-point ICP moving ``source`` onto ``target`` (rigid SE(2), no scale).
+
+    Args:
+        source: the map to move. Shape: ``(N, 2)`` or ``(N, 3)``.
+        target: the fixed map. Shape: ``(M, 2)`` or ``(M, 3)``.
+        max_iterations: stop after this many iterations.
+        tolerance: stop when the incremental motion (rotation change in rad plus
+            translation change in units) is below this.
+        max_distance: correspondences farther than this are ignored (libicp's
+            inlier distance); None uses all.
+        init: an optional initial ``(R, t)``.
+
+    Returns:
+        :class:`IcpResult`.
+    """
+    src = _points(source, "source")
+    dst = _points(target, "target")
+    if src.shape[0] == 0 or dst.shape[0] == 0:
+        raise InputError("ICP needs two non-empty maps")
+    rot = np.eye(2) if init is None else np.asarray(init[0], dtype=np.float64)
+    t = np.zeros(2) if init is None else np.asarray(init[1], dtype=np.float64)
+    it = 0
+    for it in range(1, max_iterations + 1):  # noqa: B007 - iterations are the output
+        moved = src @ rot.T + t
+        j, d2 = _nearest(moved, dst)
+        keep = np.ones_like(d2, dtype=bool) if max_distance is None else d2 <= max_distance**2
+        if keep.sum() < 2:
+            break
+        r_inc, t_inc = align_se2(moved[keep], dst[j[keep]])
+        rot, t = r_inc @ rot, r_inc @ t + t_inc
+        if abs(math.atan2(r_inc[1, 0], r_inc[0, 0])) + float(np.linalg.norm(t_inc)) < tolerance:
+            break
+    moved = src @ rot.T + t
+    _, d2 = _nearest(moved, dst)
+    if max_distance is not None:
+        inl = d2 <= max_distance**2
+        d2 = d2[inl] if inl.any() else d2
+    return IcpResult(rot, t, float(np.sqrt(np.mean(d2))), it, moved)
+
+
+def icp_rmse(map_a: np.ndarray, map_b: np.ndarray, **options: float) -> float:
+    """RMSE after ICP of ``map_a`` onto ``map_b`` (see :func:`icp`).
+
+    Shape:
+        map_a: ``(N, 2|3)``; map_b: ``(M, 2|3)``.
+    """
+    return icp(map_a, map_b, **options).rmse  # type: ignore[arg-type]

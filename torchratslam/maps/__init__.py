@@ -1,0 +1,45 @@
+"""Saved maps: the in-memory map state, the native and the authors' reference formats, merges."""
+
+from torchratslam.maps.merge import (
+    MergeResult,
+    merge_maps,
+    pc_distance,
+    pick_experience,
+    shift_activity,
+)
+from torchratslam.maps.reference_format import (
+    FILES,
+    is_reference_map,
+    read_reference,
+    write_reference,
+)
+from torchratslam.maps.state import (
+    FORMAT_NAME,
+    FORMAT_VERSION,
+    MapState,
+    check_compatible,
+    load_map,
+    load_state,
+    save_map,
+    save_state,
+)
+
+__all__ = [
+    "FILES",
+    "FORMAT_NAME",
+    "FORMAT_VERSION",
+    "MapState",
+    "MergeResult",
+    "check_compatible",
+    "is_reference_map",
+    "load_map",
+    "load_state",
+    "merge_maps",
+    "pc_distance",
+    "pick_experience",
+    "read_reference",
+    "save_map",
+    "save_state",
+    "shift_activity",
+    "write_reference",
+]

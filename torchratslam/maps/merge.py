@@ -1,0 +1,313 @@
+"""Merging two RatSLAM maps into one structure (the multisession paper, Section 3,
+Eqs. 9-17, Algorithm 1).
+
+The *partial* map is the one being built in the current session; its template ``z``
+(normally its last, just learnt) matches template ``u`` of the *loaded* map. The merge
+
+i. appends the partial templates except ``z`` after the loaded ones (Eq. 9); partial
+   template ``i`` gets id ``n_vl + i`` (``i < z``), ``z`` becomes ``u``;
+ii. moves the pose-cell activity from the partial packet ``P_z`` to the loaded
+    ``P_u``: the activity array is rolled by the rounded shift;
+iii. shifts every partial template and experience pose-cell association by
+     ``Delta = P_u - P_z`` modulo the network size (Eqs. 10-12). The paper's Eq. 10
+     prints a ``+``; the working definition, used by the authors' code, is the
+     difference. ``shift_pose_cells=False`` skips this step (the Fig. 12 ablation);
+iv. moves every partial experience by the rigid 2D transform that maps the partial
+    matching experience ``e_z`` onto the loaded ``e_u``, with ``dth = th_u - th_z +
+    relative view angle`` (Eqs. 13-14 are garbled in print; this is the arithmetic of
+    the authors' code, see ``reference-save-format.md``), drops ``e_z``, re-points the
+    links that ended (or started) at it to ``e_u`` and appends the rest (Eqs. 15-17).
+    Link measurements are relative to their source experience and stay valid.
+
+Everything is vectorised: the cost is linear in the sizes of both maps (Section 3.5).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from torchratslam.graph.errors import GraphError
+from torchratslam.maps.state import (
+    EM_ACCUM,
+    INT_FIELDS,
+    PC_BEST,
+    PER_ENTITY,
+    MapState,
+    check_compatible,
+)
+
+__all__ = ["MergeResult", "merge_maps", "pc_distance", "pick_experience", "shift_activity"]
+
+
+def _wrap(a: np.ndarray | float) -> np.ndarray | float:
+    """Angles to (-pi, pi]."""
+    return np.pi - np.mod(np.pi - np.asarray(a, dtype=np.float64), 2 * np.pi)
+
+
+def pc_distance(a: np.ndarray, b: np.ndarray, dims: tuple[int, int, int]) -> np.ndarray:
+    """Pose-cell distance: per axis the shorter way round the ring, then Euclidean.
+
+    Shape:
+        a: ``(..., 3)`` (x, y, th cells); b broadcastable to it; returns ``a.shape[:-1]``.
+    """
+    d = np.abs(np.asarray(a, np.float64) - np.asarray(b, np.float64))
+    n = np.asarray(dims, np.float64)
+    d = np.minimum(np.mod(d, n), n - np.mod(d, n))
+    return np.sqrt((d * d).sum(-1))
+
+
+def pick_experience(state: MapState, template_id: int, pc: np.ndarray | None = None) -> int:
+    """The experience of ``template_id`` whose pose-cell coordinates are closest to ``pc``
+    (default: the template's own association); -1 if the template has no experience.
+    Ties go to the lowest id."""
+    cand = np.flatnonzero(state.exp_template == template_id)
+    if cand.size == 0:
+        return -1
+    ref = state.template_pc[template_id] if pc is None else np.asarray(pc, np.float64)
+    d = pc_distance(state.exp_pc[cand], ref, state.pc_dims)
+    return int(cand[int(np.argmin(d))])
+
+
+def shift_activity(
+    activity: np.ndarray, shift_xyz: np.ndarray, src: np.ndarray | None = None
+) -> np.ndarray:
+    """Roll a ``(TH, Y, X)`` activity by whole cells, with wrap.
+
+    Without ``src`` the roll is the rounded ``shift_xyz``; with ``src`` (the packet's
+    cell coordinates) it is ``rint(src + shift) - rint(src)``, so a packet peaked at
+    the cell nearest ``src`` lands on the cell nearest ``src + shift``.
+
+    Shape:
+        activity: ``(TH, Y, X)``; shift_xyz, src: ``(3,)`` (x, y, th cells).
+    """
+    if activity.size == 0:
+        return activity.copy()
+    shift = np.asarray(shift_xyz, np.float64)
+    if src is None:
+        s = np.rint(shift).astype(np.int64)
+    else:
+        src = np.asarray(src, np.float64)
+        s = (np.rint(src + shift) - np.rint(src)).astype(np.int64)
+    return np.roll(activity, shift=(int(s[2]), int(s[1]), int(s[0])), axis=(0, 1, 2))
+
+
+def _remap(n: int, drop: int, target: int, offset: int) -> np.ndarray:
+    """Id map of a partial entity list: ``i -> offset + i`` (``i < drop``),
+    ``drop -> target``, ``i -> offset + i - 1`` (``i > drop``); ``-1`` stays ``-1``
+    (index ``n`` of the returned array, for ``ids[-1]`` lookups use ``_apply``)."""
+    ids = np.arange(n, dtype=np.int64)
+    out = offset + ids - (ids > drop)
+    if 0 <= drop < n:
+        out[drop] = target
+    return out
+
+
+def _apply(idmap: np.ndarray, ids: np.ndarray | int) -> np.ndarray:
+    ids = np.asarray(ids, np.int64)
+    safe = np.where(ids >= 0, ids, 0)
+    return np.where(ids >= 0, idmap[safe] if idmap.size else -1, -1)
+
+
+@dataclass
+class MergeResult:
+    """The merged map and what the merge did.
+
+    Attributes:
+        state: the merged map (in the loaded map's frame and pose-cell coordinates).
+        info: ``loaded_template`` u, ``partial_template`` z, ``loaded_exp`` e_u,
+            ``partial_exp`` e_z (dropped), ``pc_shift`` (dx, dy, dth cells),
+            ``transform`` (dth rad, tx m, ty m: x' = R(dth) x + t), ``template_ids``
+            and ``exp_ids`` (old partial id -> merged id), counts added.
+    """
+
+    state: MapState
+    info: dict[str, Any]
+
+    def transform_poses(self, poses: np.ndarray) -> np.ndarray:
+        """Apply the merge's rigid transform to partial-map poses.
+
+        Shape:
+            poses: ``(..., 3)`` [x, y, th] or ``(..., 2)`` [x, y]; returns the same shape.
+        """
+        dth, tx, ty = self.info["transform"]
+        return rigid_transform(np.asarray(poses, np.float64), dth, tx, ty)
+
+
+def rigid_transform(poses: np.ndarray, dth: float, tx: float, ty: float) -> np.ndarray:
+    """``x' = R(dth) [x, y] + [tx, ty]``, ``th' = wrap(th + dth)``.
+
+    Shape:
+        poses: ``(..., 2)`` or ``(..., 3)``; returns the same shape.
+    """
+    p = np.array(poses, dtype=np.float64, copy=True)
+    c, s = math.cos(dth), math.sin(dth)
+    x, y = p[..., 0].copy(), p[..., 1].copy()
+    p[..., 0] = c * x - s * y + tx
+    p[..., 1] = s * x + c * y + ty
+    if p.shape[-1] > 2:
+        p[..., 2] = _wrap(p[..., 2] + dth)
+    return p
+
+
+def merge_maps(
+    loaded: MapState,
+    partial: MapState,
+    loaded_template: int,
+    *,
+    partial_template: int | None = None,
+    relative_rad: float = 0.0,
+    loaded_exp: int | None = None,
+    partial_exp: int | None = None,
+    shift_pose_cells: bool = True,
+) -> MergeResult:
+    """Merge ``partial`` into ``loaded`` (Algorithm 1), given the template match.
+
+    Args:
+        loaded: the stored map (its frame and pose-cell coordinates are kept).
+        partial: the current session's map.
+        loaded_template: ``u``, the loaded template matched.
+        partial_template: ``z``, the partial template that matched (default: the last).
+        relative_rad: relative view angle of the match (panoramic mode; 0 otherwise).
+        loaded_exp: ``e_u`` (default: the experience of ``u`` closest in pose cells to
+            ``u``'s association).
+        partial_exp: ``e_z``, the partial experience to drop (default: the experience of
+            ``z`` closest to ``z``'s association, else the partial current experience).
+        shift_pose_cells: False skips step (iii) (the paper's Fig. 12 ablation).
+
+    Returns:
+        A :class:`MergeResult`. The inputs are not modified.
+
+    Raises:
+        MapFormatError: the maps have different pose-cell or template sizes.
+        GraphError: ``u`` or ``z`` is out of range, or ``u`` has no experience.
+    """
+    check_compatible(loaded, partial.config, what="loaded map")
+    n_vl, n_vp = loaded.n_templates, partial.n_templates
+    n_el, n_ep = loaded.n_experiences, partial.n_experiences
+    z = n_vp - 1 if partial_template is None else int(partial_template)
+    u = int(loaded_template)
+    if not 0 <= u < n_vl:
+        raise GraphError(f"loaded template {u} does not exist (the loaded map has {n_vl})")
+    if not 0 <= z < n_vp:
+        raise GraphError(f"partial template {z} does not exist (the partial map has {n_vp})")
+    e_u = pick_experience(loaded, u) if loaded_exp is None else int(loaded_exp)
+    if not 0 <= e_u < n_el:
+        raise GraphError(
+            f"loaded template {u} has no experience to merge at; match another "
+            "template or let the stored map create one"
+        )
+    if partial_exp is None:
+        e_z = pick_experience(partial, z)
+        if e_z < 0:
+            e_z = partial.current_exp
+    else:
+        e_z = int(partial_exp)
+    if not -1 <= e_z < n_ep:
+        raise GraphError(f"partial experience {e_z} does not exist (the partial map has {n_ep})")
+    dims = np.asarray(partial.pc_dims, np.float64)
+
+    # (i) templates, Eq. 9
+    keep_t = np.ones(n_vp, bool)
+    keep_t[z] = False
+    tmap = _remap(n_vp, z, u, n_vl)
+    # (ii)/(iii) pose cells, Eqs. 10-12
+    delta = loaded.template_pc[u] - partial.template_pc[z]
+    assoc_shift = delta if shift_pose_cells else np.zeros(3)
+    t_pc = np.mod(partial.template_pc[keep_t] + assoc_shift, dims)
+    # (iv) experiences, Eqs. 13-17
+    if e_z >= 0:
+        dth = float(_wrap(loaded.exp_pose[e_u, 2] - partial.exp_pose[e_z, 2] + relative_rad))
+        c, s = math.cos(dth), math.sin(dth)
+        pz = partial.exp_pose[e_z, :2]
+        tx = loaded.exp_pose[e_u, 0] - (c * pz[0] - s * pz[1])
+        ty = loaded.exp_pose[e_u, 1] - (s * pz[0] + c * pz[1])
+    else:  # a partial map without experiences: nothing to move
+        dth, tx, ty = 0.0, 0.0, 0.0
+    keep_e = np.ones(n_ep, bool)
+    if e_z >= 0:
+        keep_e[e_z] = False
+    emap = _remap(n_ep, e_z, e_u, n_el)
+    new_pose = rigid_transform(partial.exp_pose[keep_e], dth, tx, ty)
+    new_pc = np.mod(partial.exp_pc[keep_e] + assoc_shift, dims)
+    new_tpl = _apply(tmap, partial.exp_template[keep_e])
+    lf, lt = _apply(emap, partial.link_from), _apply(emap, partial.link_to)
+    keep_l = lf != lt  # a link between e_z and e_u cannot exist; guard anyway
+
+    def cat(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        return np.concatenate([a, b.astype(a.dtype, copy=False)])
+
+    extra: dict[str, np.ndarray] = {}
+    keep_of = {"template": keep_t, "exp": keep_e, "link": keep_l}
+    for key in sorted(set(loaded.extra) | set(partial.extra)):
+        prefix = key.split(":", 1)[0] if ":" in key else ""
+        if prefix in PER_ENTITY:
+            a, b = loaded.extra.get(key), partial.extra.get(key)
+            n_a = getattr(loaded, PER_ENTITY[prefix]).shape[0]
+            n_b = getattr(partial, PER_ENTITY[prefix]).shape[0]
+            ref = a if a is not None else b
+            if a is None:
+                a = np.zeros((n_a, *ref.shape[1:]), ref.dtype)
+            if b is None:
+                b = np.zeros((n_b, *ref.shape[1:]), ref.dtype)
+            extra[key] = cat(a, b[keep_of[prefix]])
+        elif key in partial.extra:
+            extra[key] = np.array(partial.extra[key], copy=True)
+    # the session's running values move with the robot into the loaded map
+    if EM_ACCUM in extra:  # [x, y, facing, time] accumulated in the partial map's frame
+        acc = np.array(extra[EM_ACCUM], np.float64, copy=True)
+        acc[:2] = rigid_transform(acc[:2], dth, 0.0, 0.0)
+        acc[2] = float(_wrap(acc[2] + dth))
+        extra[EM_ACCUM] = acc
+    if PC_BEST in extra:  # the decoded packet centre moves with the activity roll
+        src = partial.template_pc[z]
+        roll = np.rint(src + delta) - np.rint(src)
+        extra[PC_BEST] = np.mod(np.asarray(extra[PC_BEST], np.float64) + roll, dims)
+    ids = {k: int(getattr(partial, k)) for k in INT_FIELDS}
+    ids["current_vt"] = int(_apply(tmap, ids["current_vt"]))
+    ids["prev_vt"] = int(_apply(tmap, ids["prev_vt"]))
+    ids["current_exp"] = int(_apply(emap, ids["current_exp"])) if ids["current_exp"] >= 0 else e_u
+    ids["prev_exp"] = int(_apply(emap, ids["prev_exp"]))
+
+    merged = MapState(
+        config=dict(partial.config),
+        templates=cat(loaded.templates, partial.templates[keep_t]),
+        template_mean=cat(loaded.template_mean, partial.template_mean[keep_t]),
+        template_frame=cat(loaded.template_frame, partial.template_frame[keep_t]),
+        template_pc=cat(loaded.template_pc, t_pc),
+        template_decay=cat(loaded.template_decay, partial.template_decay[keep_t]),
+        exp_pose=cat(loaded.exp_pose, new_pose),
+        exp_pc=cat(loaded.exp_pc, new_pc),
+        exp_template=cat(loaded.exp_template, new_tpl),
+        exp_frame=cat(loaded.exp_frame, partial.exp_frame[keep_e]),
+        exp_t=cat(loaded.exp_t, partial.exp_t[keep_e]),
+        link_from=cat(loaded.link_from, lf[keep_l]),
+        link_to=cat(loaded.link_to, lt[keep_l]),
+        link_d=cat(loaded.link_d, partial.link_d[keep_l]),
+        link_heading=cat(loaded.link_heading, partial.link_heading[keep_l]),
+        link_facing=cat(loaded.link_facing, partial.link_facing[keep_l]),
+        link_dt=cat(loaded.link_dt, partial.link_dt[keep_l]),
+        activity=shift_activity(partial.activity, delta, partial.template_pc[z]),
+        extra=extra,
+        scalars=dict(partial.scalars),
+        **ids,
+    )
+    info = {
+        "loaded_template": u,
+        "partial_template": z,
+        "loaded_exp": e_u,
+        "partial_exp": e_z,
+        "pc_shift": [float(v) for v in delta],
+        "pc_shift_applied": bool(shift_pose_cells),
+        "transform": [dth, float(tx), float(ty)],
+        "template_ids": tmap,
+        "exp_ids": emap,
+        "templates_added": int(keep_t.sum()),
+        "experiences_added": int(keep_e.sum()),
+        "links_added": int(keep_l.sum()),
+    }
+    return MergeResult(state=dataclasses.replace(merged), info=info)
