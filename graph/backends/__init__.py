@@ -10,21 +10,18 @@
   appended to the graph (rebuilds after any other change).
 
 Every backend returns the new ``(N, 3)`` poses and never modifies the graph it is given.
+gtsam is imported only when a gtsam backend (or one of the gtsam helpers re-exported
+here) is first used, so the alpha rule works without loading it.
 """
 
 from __future__ import annotations
 
-from typing import Any, Protocol, runtime_checkable
+import importlib
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
 
 import numpy as np
 from torchratslam.graph.backends.alpha import AlphaBackend, AlphaReferenceBackend
-from torchratslam.graph.backends.gtsam_backend import (
-    GraphErrorEvaluator,
-    GtsamBackend,
-    ISAM2Backend,
-    factor_graph,
-    graph_error,
-)
 from torchratslam.graph.errors import ConfigError, unknown_name_message
 from torchratslam.graph.posegraph import PoseGraph
 
@@ -45,11 +42,43 @@ class Backend(Protocol):
         ...
 
 
-BACKENDS: dict[str, type] = {
+if TYPE_CHECKING:
+    from torchratslam.graph.backends.gtsam_backend import (
+        GraphErrorEvaluator,
+        GtsamBackend,
+        ISAM2Backend,
+        factor_graph,
+        graph_error,
+    )
+
+# Names served by gtsam_backend, imported (with gtsam) on first access.
+_GTSAM_NAMES = frozenset(
+    {"GraphErrorEvaluator", "GtsamBackend", "ISAM2Backend", "factor_graph", "graph_error"}
+)
+
+
+def __getattr__(name: str) -> Any:
+    if name in _GTSAM_NAMES:
+        module = importlib.import_module("torchratslam.graph.backends.gtsam_backend")
+        return getattr(module, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def _lazy_gtsam(class_name: str) -> Callable[..., Any]:
+    """A constructor that imports the gtsam backend module only when called."""
+
+    def build(**options: Any) -> Any:
+        return __getattr__(class_name)(**options)
+
+    build.__name__ = build.__qualname__ = class_name
+    return build
+
+
+BACKENDS: dict[str, Callable[..., Any]] = {
     "alpha": AlphaBackend,
     "alpha_reference": AlphaReferenceBackend,
-    "gtsam": GtsamBackend,
-    "isam2": ISAM2Backend,
+    "gtsam": _lazy_gtsam("GtsamBackend"),
+    "isam2": _lazy_gtsam("ISAM2Backend"),
 }
 
 
@@ -67,9 +96,10 @@ def make_backend(name: str, **options: Any) -> Backend:
     if name not in BACKENDS:
         raise ConfigError(unknown_name_message("pose-graph backend", name, BACKENDS))
     try:
-        return BACKENDS[name](**options)
+        backend: Backend = BACKENDS[name](**options)
     except TypeError as exc:
         raise ConfigError(f"bad option for backend {name!r}: {exc}") from None
+    return backend
 
 
 __all__ = [

@@ -1,0 +1,80 @@
+"""``import torchratslam`` stays light and gtsam loads only for the gtsam backends.
+
+Each check runs in a fresh interpreter and inspects ``sys.modules``.
+"""
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def _loaded_after(code: str, tmp_path: Path) -> set[str]:
+    """Run ``code`` in a new interpreter (cwd outside the checkout); return which of
+    torch / gtsam it left in ``sys.modules``."""
+    probe = code + "\nimport sys\nprint(sorted({'torch', 'gtsam'} & set(sys.modules)))\n"
+    out = subprocess.run(
+        [sys.executable, "-c", probe], cwd=tmp_path, capture_output=True, text=True, check=True
+    )
+    return set(eval(out.stdout.strip().splitlines()[-1]))
+
+
+def test_import_torchratslam_loads_neither_torch_nor_gtsam(tmp_path):
+    code = "import torchratslam\nfrom torchratslam import load_config, ConfigError\n"
+    code += "load_config('virtual_tour')\n"
+    assert _loaded_after(code, tmp_path) == set()
+
+
+def test_experience_map_relaxed_by_the_alpha_rule_loads_no_gtsam(tmp_path):
+    code = """
+import torchratslam.graph
+from torchratslam.graph.backends import make_backend
+from torchratslam.graph.experience_map import ExperienceMap
+from torchratslam.graph.messages import Action, ActionKind
+from torchratslam.graph.params import ExperienceMapParams
+
+em = ExperienceMap(ExperienceMapParams(exp_backend="alpha", exp_loops=5))
+for i in range(4):
+    em.apply(Action(ActionKind.CREATE, dest_id=i))
+    em.on_odometry(1.0, 1.5, 1.0)
+em.apply(Action(ActionKind.LINK, dest_id=0))
+before = em.poses.copy()
+em.iterate()
+assert (em.poses != before).any(), "the loop closure moved nothing"
+make_backend("alpha_reference").relax(em.posegraph(), passes=2)
+"""
+    assert _loaded_after(code, tmp_path) == set()
+
+
+def test_the_gtsam_backends_still_load_and_relax(tmp_path):
+    code = """
+import numpy as np
+from torchratslam.graph.backends import GraphErrorEvaluator, make_backend
+from torchratslam.graph.posegraph import PoseGraph
+
+poses = np.array([[0.0, 0, 0], [1.1, 0, 0], [2.0, 0.2, 0]])
+edges = np.array([[0, 1], [1, 2], [0, 2]])
+meas = np.array([[1.0, 0, 0], [1.0, 0, 0], [2.0, 0, 0]])
+pg = PoseGraph(poses, edges, meas, np.arange(3))
+ev = GraphErrorEvaluator(pg)
+for name in ("gtsam", "isam2"):
+    out = make_backend(name).relax(pg, passes=1)
+    assert ev(out) < 1e-9 < ev(poses), (name, ev(out))
+"""
+    assert _loaded_after(code, tmp_path) == {"gtsam"}
+
+
+@pytest.mark.parametrize("name", ["GtsamBackend", "factor_graph", "nope"])
+def test_lazy_names_resolve_or_fail_like_attributes(name):
+    import torchratslam.graph.backends as backends
+
+    if name == "nope":
+        with pytest.raises(AttributeError, match="nope"):
+            getattr(backends, name)
+    else:
+        from torchratslam.graph.backends import gtsam_backend
+
+        assert getattr(backends, name) is getattr(gtsam_backend, name)
