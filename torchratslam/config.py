@@ -100,8 +100,11 @@ class LocalViewParams(Params):
     vt_step_match: int = param(5, "column step between compared offsets", gt=0)
     vt_panoramic: bool = param(False, "images are 360-degree panoramas (circular matching)")
     vt_match_threshold: float = param(0.03, "MAD above which a new template is learnt", ge=0.0)
-    template_x_size: int = param(1, "template width (columns)", gt=0)
-    template_y_size: int = param(1, "template height (rows)", gt=0)
+    # OpenRatSLAM's own defaults (1 x 1 with vt_shift_match 25) cannot be matched in
+    # normal mode; 60 x 10 is the template of its shipped St Lucia and New College
+    # configs (all three of its configs use 60 columns), so the defaults run.
+    template_x_size: int = param(60, "template width (columns; OpenRatSLAM: 1)", gt=0)
+    template_y_size: int = param(10, "template height (rows; OpenRatSLAM: 1)", gt=0)
     image_crop_x_min: int = param(0, "crop: first column", ge=0)
     image_crop_x_max: int = param(-1, "crop: end column (exclusive; -1: image width)", ge=-1)
     image_crop_y_min: int = param(0, "crop: first row", ge=0)
@@ -160,6 +163,33 @@ class RatSLAMConfig:
     experience_map: ExperienceMapParams = field(default_factory=ExperienceMapParams)
     visual_odometry: VisualOdometryParams = field(default_factory=VisualOdometryParams)
 
+    def __post_init__(self) -> None:
+        self.check()
+
+    def check(self) -> None:
+        """Cross-field checks (each key alone is checked by its section).
+
+        Raises:
+            ConfigError: two keys that cannot go together, both named with their values.
+        """
+        lv = self.local_view
+        if not lv.vt_panoramic and lv.template_x_size <= 2 * lv.vt_shift_match:
+            raise ConfigError(
+                f"template_x_size = {lv.template_x_size} must exceed 2 * vt_shift_match = "
+                f"{2 * lv.vt_shift_match} when vt_panoramic is off (the compared width is "
+                "template_x_size - 2 * vt_shift_match); lower vt_shift_match or widen "
+                "the template"
+            )
+        vo = self.visual_odometry
+        crops = [(lv, "image_crop_x"), (lv, "image_crop_y")]
+        crops += [(vo, f"{p}_image_{a}") for p in ("vtrans", "vrot") for a in "xy"]
+        for section, stem in crops:
+            lo, hi = getattr(section, f"{stem}_min"), getattr(section, f"{stem}_max")
+            if hi != -1 and hi <= lo:
+                raise ConfigError(
+                    f"{stem}_max = {hi} must exceed {stem}_min = {lo} (or be -1 for the image edge)"
+                )
+
     @classmethod
     def sections(cls) -> dict[str, type[Params]]:
         hints = {f.name: f.default_factory for f in dataclasses.fields(cls)}
@@ -192,9 +222,9 @@ class RatSLAMConfig:
             grouped[owner[key]][key] = value
         try:
             built = {attr: klass(**grouped[attr]) for attr, klass in cls.sections().items()}
+            return cls(**built)
         except ConfigError as exc:
             raise ConfigError(f"{source}: {exc}") from None
-        return cls(**built)
 
     def to_flat(self) -> dict[str, Any]:
         """The flat ``{key: value}`` form (what :meth:`from_flat` reads)."""
@@ -259,7 +289,8 @@ def load_config(path: str | Path | None = None, **overrides: Any) -> RatSLAMConf
 
     Raises:
         InputError: the file does not exist.
-        ConfigError: unknown key, wrong type or out-of-range value.
+        ConfigError: unknown key, wrong type or out-of-range value, or two keys that
+            cannot go together (:meth:`RatSLAMConfig.check`).
     """
     if path is None:
         return RatSLAMConfig.from_flat(overrides, source="overrides")

@@ -14,7 +14,9 @@ from torchratslam.errors import InputError, MapFormatError
 from torchratslam.maps import state as state_mod
 from torchratslam.maps.state import MapState, check_compatible, load_map, load_state, save_map
 
-CONFIG = load_config(pc_dim_xy=7, pc_dim_th=10, template_x_size=5, template_y_size=3).to_flat()
+CONFIG = load_config(
+    pc_dim_xy=7, pc_dim_th=10, template_x_size=5, template_y_size=3, vt_shift_match=2
+).to_flat()
 
 
 def random_map(seed: int = 0, n: int = 6, m: int = 9, el: int = 11) -> MapState:
@@ -187,7 +189,13 @@ def test_config_compatibility(tmp_path):
         load_config(
             **{
                 k: CONFIG[k]
-                for k in ("pc_dim_xy", "pc_dim_th", "template_x_size", "template_y_size")
+                for k in (
+                    "pc_dim_xy",
+                    "pc_dim_th",
+                    "template_x_size",
+                    "template_y_size",
+                    "vt_shift_match",
+                )
             },
             vt_match_threshold=0.2,
         ),
