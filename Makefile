@@ -5,8 +5,11 @@ BIN     := $(VENV)/bin
 STAMP   := $(VENV)/.installed
 TORCH   := torch==2.13.0
 OUT     ?= out
+# The package as it installs (torchratslam/graph -> graph/, torchratslam/presets ->
+# configs/), as symlinks, for mypy and lint-imports, which cannot follow package-dir.
+VIEW    := build/lint
 
-.PHONY: all install demo test bench lint format clean
+.PHONY: all install demo test bench lint lint-view format clean
 
 all: test
 
@@ -31,9 +34,19 @@ test: $(STAMP)
 bench: $(STAMP)
 	$(BIN)/python -m benchmarks
 
-lint: $(STAMP)
+lint-view:
+	rm -rf $(VIEW)
+	mkdir -p $(VIEW)/torchratslam
+	ln -s $(CURDIR)/torchratslam/* $(VIEW)/torchratslam/
+	ln -s $(CURDIR)/graph $(VIEW)/torchratslam/graph
+	ln -s $(CURDIR)/configs $(VIEW)/torchratslam/presets
+
+# ruff, mypy and the import contracts ([tool.importlinter]); each must report nothing.
+lint: $(STAMP) lint-view
 	$(BIN)/ruff check .
 	$(BIN)/ruff format --check .
+	MYPYPATH=$(VIEW) $(BIN)/mypy -p torchratslam
+	cd $(VIEW) && $(CURDIR)/$(BIN)/lint-imports --config $(CURDIR)/pyproject.toml --no-cache
 
 format: $(STAMP)
 	$(BIN)/ruff format .
