@@ -373,7 +373,7 @@ class ExperienceMap:
             dt: interval (s).
         """
         step = vtrans * dt
-        self.accum_facing = wrap_rad(self.accum_facing + vrot * dt)
+        self.accum_facing = float(wrap_rad(self.accum_facing + vrot * dt))
         self.accum_x += step * math.cos(self.accum_facing)
         self.accum_y += step * math.sin(self.accum_facing)
         self.accum_time += dt
@@ -448,7 +448,13 @@ class ExperienceMap:
             x = float(self._pose[cur, 0]) + self.accum_x
             y = float(self._pose[cur, 1]) + self.accum_y
         new = self.add_experience(
-            x, y, wrap_rad(self.accum_facing), pc=pc, template_id=template_id, frame=frame, t=t
+            x,
+            y,
+            float(wrap_rad(self.accum_facing)),
+            pc=pc,
+            template_id=template_id,
+            frame=frame,
+            t=t,
         )
         if cur >= 0:
             self._transition(cur, new, behaviour)
@@ -505,7 +511,7 @@ class ExperienceMap:
         self.current_id = dest
         self.accum_x = 0.0
         self.accum_y = 0.0
-        self.accum_facing = wrap_rad(float(self._pose[dest, 2]) + relative_rad)
+        self.accum_facing = float(wrap_rad(float(self._pose[dest, 2]) + relative_rad))
         self.relative_rad = float(relative_rad)
 
     def _repeat_or_count(self, cur: int, dest: int, relative_rad: float, behaviour: int) -> None:

@@ -274,7 +274,7 @@ def compose_odometry(
         return poses
     poses[0] = start
     # sequential composition: angles by cumulative sum, positions by rotated cumsum
-    th = wrap_angle(np.cumsum(np.concatenate([[start[2]], step[1:, 2]])))
+    th = np.asarray(wrap_angle(np.cumsum(np.concatenate([[start[2]], step[1:, 2]]))))
     c, s = np.cos(th[:-1]), np.sin(th[:-1])
     dx = c * step[1:, 0] - s * step[1:, 1]
     dy = s * step[1:, 0] + c * step[1:, 1]

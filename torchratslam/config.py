@@ -181,7 +181,7 @@ class RatSLAMConfig:
                 "the template"
             )
         vo = self.visual_odometry
-        crops = [(lv, "image_crop_x"), (lv, "image_crop_y")]
+        crops: list[tuple[Params, str]] = [(lv, "image_crop_x"), (lv, "image_crop_y")]
         crops += [(vo, f"{p}_image_{a}") for p in ("vtrans", "vrot") for a in "xy"]
         for section, stem in crops:
             lo, hi = getattr(section, f"{stem}_min"), getattr(section, f"{stem}_max")
@@ -221,7 +221,9 @@ class RatSLAMConfig:
                 raise ConfigError(f"{source}: " + unknown_name_message("parameter", key, owner))
             grouped[owner[key]][key] = value
         try:
-            built = {attr: klass(**grouped[attr]) for attr, klass in cls.sections().items()}
+            built: dict[str, Any] = {
+                attr: klass(**grouped[attr]) for attr, klass in cls.sections().items()
+            }
             return cls(**built)
         except ConfigError as exc:
             raise ConfigError(f"{source}: {exc}") from None
@@ -261,7 +263,7 @@ def _read_openratslam_txt(path: Path) -> dict[str, Any]:
         strict=False,
         interpolation=None,
     )
-    parser.optionxform = str  # keep key case
+    parser.optionxform = str  # type: ignore[assignment,method-assign]  # keep key case
     try:
         parser.read_string(path.read_text())
     except configparser.Error as exc:

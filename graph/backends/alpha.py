@@ -223,7 +223,7 @@ class AlphaBackend:
 
     def reset(self) -> None:
         """Forget the cached schedule."""
-        self.__init__(self.schedule)
+        self.__init__(self.schedule)  # type: ignore[misc]
 
     @property
     def num_classes(self) -> int:

@@ -27,7 +27,7 @@ DEFAULT_SIGMAS = (1.0, 1.0, 1.0)
 DEFAULT_PRIOR_SIGMA = 1e-4
 
 
-def _sigmas(sigmas: Sequence[float] | None) -> np.ndarray:
+def _sigmas(sigmas: Sequence[float] | np.ndarray | None) -> np.ndarray:
     s = np.asarray(DEFAULT_SIGMAS if sigmas is None else sigmas, dtype=np.float64)
     if s.shape != (3,) or not np.all(s > 0):
         raise ConfigError(f"sigmas must be three positive numbers (x, y, th), got {sigmas!r}")
@@ -37,12 +37,12 @@ def _sigmas(sigmas: Sequence[float] | None) -> np.ndarray:
 class _NoiseModels:
     """Noise model per edge: the graph's information, else one diagonal model."""
 
-    def __init__(self, pg: PoseGraph, sigmas: Sequence[float] | None) -> None:
+    def __init__(self, pg: PoseGraph, sigmas: Sequence[float] | np.ndarray | None) -> None:
         self.default = gtsam.noiseModel.Diagonal.Sigmas(_sigmas(sigmas))
         self.info = pg.information
-        self._cache: dict[bytes, object] = {}
+        self._cache: dict[bytes, gtsam.noiseModel.Base] = {}
 
-    def __call__(self, i: int) -> object:
+    def __call__(self, i: int) -> gtsam.noiseModel.Base:
         if self.info is None:
             return self.default
         m = self.info[i]
@@ -88,7 +88,7 @@ def _poses_from(values: gtsam.Values, n: int) -> np.ndarray:
 
 
 def factor_graph(
-    pg: PoseGraph, *, sigmas: Sequence[float] | None = None, priors: bool = True
+    pg: PoseGraph, *, sigmas: Sequence[float] | np.ndarray | None = None, priors: bool = True
 ) -> gtsam.NonlinearFactorGraph:
     """The gtsam factor graph of ``pg`` (see the module doc for the noise model)."""
     g = gtsam.NonlinearFactorGraph()
@@ -104,7 +104,9 @@ def factor_graph(
 class GraphErrorEvaluator:
     """``graph.error`` of one graph's edges (no priors) for many pose sets."""
 
-    def __init__(self, pg: PoseGraph, *, sigmas: Sequence[float] | None = None) -> None:
+    def __init__(
+        self, pg: PoseGraph, *, sigmas: Sequence[float] | np.ndarray | None = None
+    ) -> None:
         self.num_poses = pg.num_poses
         self.graph = factor_graph(pg, sigmas=sigmas, priors=False)
 
@@ -117,7 +119,10 @@ class GraphErrorEvaluator:
 
 
 def graph_error(
-    pg: PoseGraph, poses: np.ndarray | None = None, *, sigmas: Sequence[float] | None = None
+    pg: PoseGraph,
+    poses: np.ndarray | None = None,
+    *,
+    sigmas: Sequence[float] | np.ndarray | None = None,
 ) -> float:
     """gtsam's ``graph.error`` (0.5 sum of squared whitened residuals) of the edges.
 
@@ -141,7 +146,7 @@ class GtsamBackend:
 
     def __init__(
         self,
-        sigmas: Sequence[float] | None = None,
+        sigmas: Sequence[float] | np.ndarray | None = None,
         max_iterations: int = 100,
         relative_error_tol: float = 1e-10,
     ) -> None:
@@ -201,7 +206,7 @@ class ISAM2Backend:
 
     def __init__(
         self,
-        sigmas: Sequence[float] | None = None,
+        sigmas: Sequence[float] | np.ndarray | None = None,
         relinearize_threshold: float = 0.01,
         relinearize_skip: int = 1,
         extra_updates: int = 0,
@@ -240,7 +245,8 @@ class ISAM2Backend:
             return False
         if (self._info is None) != (pg.information is None):
             return False
-        return self._info is None or np.array_equal(pg.information[:e], self._info)
+        info = pg.information
+        return self._info is None or (info is not None and np.array_equal(info[:e], self._info))
 
     def relax(self, pg: PoseGraph, *, passes: int = 0, correction: float = 0.5) -> np.ndarray:
         """Bring the iSAM2 estimate up to date with ``pg``; ``passes`` is ignored.
@@ -281,15 +287,17 @@ class ISAM2Backend:
         for r in prior_rows:
             graph.add(gtsam.PriorFactorPose2(r, gtsam.Pose2(*pg.poses[r]), prior))
         values = _values(pg.poses, range(self._n, pg.num_poses))
+        isam = self._isam
+        assert isam is not None  # made above unless the graph extends the last one
         try:
             if not incremental and pg.num_edges:
                 # a (re)build starts from scratch: solve it in batch and hand iSAM2 the
                 # optimum as linearisation point, so it starts exactly where LM ends
                 values = gtsam.LevenbergMarquardtOptimizer(graph, values, self._lm).optimize()
-            self._isam.update(graph, values)
+            isam.update(graph, values)
             for _ in range(self.extra_updates):
-                self._isam.update()
-            out = _poses_from(self._isam.calculateEstimate(), pg.num_poses)
+                isam.update()
+            out = _poses_from(isam.calculateEstimate(), pg.num_poses)
         except RuntimeError as exc:
             self.reset()
             raise GraphError(f"iSAM2 update failed: {exc}") from None

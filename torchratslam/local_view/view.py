@@ -49,8 +49,8 @@ candidate is provably above ``vt_match_threshold``, so for a new template its
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
-from typing import Any
+from collections.abc import Callable, Mapping
+from typing import Any, cast
 
 import numpy as np
 import torch
@@ -237,13 +237,19 @@ class TemplateBank:
         device: template device.
     """
 
+    # Allocated by _alloc (setattr): the rows, their means and the matcher's summaries.
+    _data: torch.Tensor
+    _means: torch.Tensor
+    _gsort: torch.Tensor
+    _pool: torch.Tensor
+
     def __init__(
         self,
         y_size: int,
         x_size: int,
         *,
         summaries: Callable[[torch.Tensor], dict[str, torch.Tensor]] | None = None,
-        summary_shapes: dict[str, tuple[int, ...]] | None = None,
+        summary_shapes: Mapping[str, tuple[int, ...]] | None = None,
         capacity: int = 64,
         dtype: torch.dtype = torch.float32,
         device: torch.device | str | None = None,
@@ -824,6 +830,7 @@ class _TemplateView:
         """:meth:`match` of an already checked template (``process`` made it itself)."""
         if self.bank is None or len(self.bank) == 0:
             return -1, 0, math.inf
+        assert self.matcher is not None
         return self.matcher.search(
             self.bank, t, hint=self.current_id, prune=self.prune, threshold=threshold
         )
@@ -842,6 +849,7 @@ class _TemplateView:
         if self.bank is None:
             raise InputError("the template bank is empty")
         sel = None if ids is None else torch.as_tensor(ids, dtype=torch.int64, device=self.device)
+        assert self.matcher is not None
         return self.matcher.errors(self.bank, t, sel)
 
     def process(self, observation: Any, frame_index: int | None = None) -> ViewMatch:
@@ -866,6 +874,7 @@ class _TemplateView:
         if tid >= 0 and err <= self.params.vt_match_threshold:
             self.current_id = tid
             return ViewMatch(tid, self.relative_rad(offset), err, offset, False)
+        assert self.bank is not None  # _to_template set it up
         new = self.bank.append(view, frame)[0]
         self.current_id = new
         return ViewMatch(new, 0.0, err, 0, True)
@@ -881,6 +890,7 @@ class _TemplateView:
             raise InputError(f"templates: expected (K, Y, X), got shape {tuple(t.shape)}")
         if self.bank is None:
             self._setup(t.shape[1], t.shape[2])
+        assert self.bank is not None
         return self.bank.append(t, frames)
 
     # -- state
@@ -888,15 +898,16 @@ class _TemplateView:
         """Everything needed to resume: numpy arrays and Python scalars only."""
         shape = self.template_shape or (0, 0)
         n = len(self)
+        bank = cast(TemplateBank, self.bank)  # set up whenever n > 0
         return {
             "kind": self.kind,
             "version": STATE_VERSION,
             "template_shape": np.asarray(shape, dtype=np.int64),
             "templates": (
-                self.bank.data.cpu().numpy().copy() if n else np.zeros((0, *shape), np.float32)
+                bank.data.cpu().numpy().copy() if n else np.zeros((0, *shape), np.float32)
             ),
-            "means": self.bank.means.cpu().numpy().copy() if n else np.zeros(0, np.float32),
-            "frames": self.bank.frames.cpu().numpy().copy() if n else np.zeros(0, np.int64),
+            "means": bank.means.cpu().numpy().copy() if n else np.zeros(0, np.float32),
+            "frames": bank.frames.cpu().numpy().copy() if n else np.zeros(0, np.int64),
             "current_id": int(self.current_id),
             "previous_id": int(self.previous_id),
             "frame_counter": int(self.frame_counter),
@@ -934,7 +945,9 @@ class _TemplateView:
         if shape != (0, 0):
             self._setup(*shape)
             if len(templates):
-                self.bank.append(torch.as_tensor(templates), torch.as_tensor(frames))
+                cast(TemplateBank, self.bank).append(
+                    torch.as_tensor(templates), torch.as_tensor(frames)
+                )
         self.current_id = int(state.get("current_id", -1))
         self.previous_id = int(state.get("previous_id", -1))
         self.frame_counter = int(state.get("frame_counter", 0))

@@ -48,7 +48,7 @@ view template and odometry have both arrived since the last decision.
 from __future__ import annotations
 
 import math
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 import torch
@@ -410,7 +410,7 @@ class PoseCellNetwork(nn.Module):
             self._best = self._decode(peak)
         return self._best.clone()
 
-    def _step_full(self, trans: np.ndarray, rot: np.ndarray) -> torch.Tensor:
+    def _step_full(self, trans: np.ndarray, rot: np.ndarray) -> torch.Tensor | np.ndarray:
         if self.method == "conv3d":
             a = self._finish_dynamics(self.inhibit(self.excite(self.activity)))
             pool = [a, torch.empty_like(a), torch.empty_like(a)]
@@ -419,7 +419,7 @@ class PoseCellNetwork(nn.Module):
         a = self._path_integrate(pool, trans, rot, np.zeros(self.batch_size, dtype=np.int64))
         self.activity.copy_(a)
         self._occ = None
-        self.last_crop = tuple(self.activity.shape[1:])
+        self.last_crop = cast(tuple[int, int, int], tuple(self.activity.shape[1:]))
         return self._argmax()
 
     def _argmax(self) -> torch.Tensor | np.ndarray:
@@ -539,12 +539,12 @@ class PoseCellNetwork(nn.Module):
         between steps while nobody else writes into the buffer)."""
         key = (self.activity.data_ptr(), self.activity._version)
         if self._occ is None or self._occ_key != key:
-            nz = (self.activity != 0).cpu().numpy()
+            nz: Any = (self.activity != 0).cpu().numpy()
             self._occ = (nz.any(axis=(2, 3)), nz.any(axis=(1, 3)), nz.any(axis=(1, 2)))
             self._occ_key = key
         return self._occ
 
-    def _step_crop(self, trans: np.ndarray, rot: np.ndarray) -> torch.Tensor:
+    def _step_crop(self, trans: np.ndarray, rot: np.ndarray) -> torch.Tensor | np.ndarray:
         b = self.batch_size
         n_x, n_y, n_t = self.dims
         occ = self._occupancy()
@@ -586,7 +586,7 @@ class PoseCellNetwork(nn.Module):
         a = self._path_integrate(pool, trans, rot, starts[0]).reshape(b, -1)
         act.scatter_(1, flat, a)
         # the new occupancy, from the crop (every other cell is zero)
-        nz = (a != 0).cpu().numpy().reshape(b, lt, ly, lx)
+        nz: Any = (a != 0).cpu().numpy().reshape(b, lt, ly, lx)
         nz_t = nz.any(axis=3)
         new_occ = []
         for axis_i, (o_crop, n) in enumerate(
@@ -630,7 +630,7 @@ class PoseCellNetwork(nn.Module):
         pt, py, px = pk // (n_y * n_x), (pk // n_x) % n_y, pk % n_x
         (wx, ex, _), (wy, ey, _), (wt, et, _) = self._rings()
         ix, iy, it = wx[px], wy[py], wt[pt]  # (B, 2c + 1) each
-        act = self.activity.detach()
+        act: Any = self.activity.detach()
         act = act.numpy() if act.device.type == "cpu" else act.cpu().numpy()
         cube = act[
             np.arange(b)[:, None, None, None],
@@ -752,7 +752,7 @@ class PoseCells:
         self.relative_rad = 0.0
         self._odo_update = False
         self._vt_update = False
-        self._best = tuple(float(d // 2) for d in self.dims)
+        self._best = cast(tuple[float, float, float], tuple(float(d // 2) for d in self.dims))
 
     def reset(self) -> None:
         """Back to the start: one active cell in the middle, no templates or experiences."""
@@ -986,7 +986,8 @@ class PoseCells:
             best = np.asarray(state["best"], dtype=np.float64).reshape(3)
             self._best = (float(best[0]), float(best[1]), float(best[2]))
         elif current_exp >= 0:
-            self._best = tuple(float(v) for v in epc[current_exp])
+            ex, ey, eth = (float(v) for v in epc[current_exp])
+            self._best = (ex, ey, eth)
         if not activity.size and current_exp >= 0:
             x, y, th = (int(v) % d for v, d in zip(epc[current_exp], self.dims, strict=True))
             self.network.reset()

@@ -85,6 +85,12 @@ class Obstacles:
         return replace(self.world, segments=seg)
 
 
+def _obstacles(session: Session) -> Obstacles:
+    """The session's obstacles (the caller knows it has some)."""
+    assert session.obstacles is not None
+    return session.obstacles
+
+
 @dataclass
 class Session:
     """One continuous recording: ground-truth poses, odometry, and lazily rendered frames.
@@ -116,10 +122,11 @@ class Session:
     odometry: np.ndarray
     camera: Camera
     lasers: dict[str, Laser] = field(default_factory=dict)
-    laps: np.ndarray | None = None
-    gain: np.ndarray | None = None
+    # None: filled in by __post_init__ (so typed as arrays)
+    laps: np.ndarray = None  # type: ignore[assignment]
+    gain: np.ndarray = None  # type: ignore[assignment]
     pixel_noise: float = 0.0
-    keys: np.ndarray | None = None
+    keys: np.ndarray = None  # type: ignore[assignment]
     obstacles: Obstacles | None = None
     info: dict = field(default_factory=dict)
 
@@ -304,7 +311,7 @@ class Tour:
         obst = None
         if ss[0].obstacles is not None:
             o = ss[0].obstacles
-            obst = replace(o, centres=np.concatenate([s.obstacles.centres for s in ss]))
+            obst = replace(o, centres=np.concatenate([_obstacles(s).centres for s in ss]))
         return Session(
             name="full",
             tour=self.name,
@@ -366,7 +373,7 @@ class Tour:
                 laps.append(np.full(m, ss[i - 1].laps[-1]))
                 gain.append(np.full(m, ss[i - 1].gain[-1]))
                 if sess.obstacles is not None:
-                    o = ss[i - 1].obstacles
+                    o = _obstacles(ss[i - 1])
                     c = np.repeat(o.centres[-1:], m, axis=0)
                     c[:, o.n_moved :] = 1e4  # no pedestrians on a bridge
                     centres.append(c)
@@ -503,7 +510,7 @@ def _lasers(o: _Opts, default: bool) -> dict[str, Laser]:
     on = default if o.lasers is None else bool(o.lasers)
     if not on:
         return {}
-    kw = dict(
+    kw: dict[str, Any] = dict(
         n_beams=int(o.laser_beams),
         fov_deg=o.laser_fov_deg,
         max_range=o.laser_max_range,
@@ -556,7 +563,7 @@ def _assemble(name: str, b: _Build, o: _Opts, seed: int, options: dict) -> Tour:
     n_moved, n_people = int(o.moved_obstacles), int(o.moving_obstacles)
     k_obst = n_moved + n_people
     obst_world = b.world
-    shape = None
+    shape: np.ndarray | None = None
     if k_obst:
         sizes = np.r_[np.full(n_moved, b.obstacle_size), np.full(n_people, 0.4 * b.scale)]
         shape = _box_shape(sizes)
@@ -582,7 +589,7 @@ def _assemble(name: str, b: _Build, o: _Opts, seed: int, options: dict) -> Tour:
         obst_world = b.world.extended(extra)
     # moved boxes: one layout per (session, lap); pedestrians: walk along the main route
     layouts: dict[tuple[int, int], np.ndarray] = {}
-    peds = None
+    peds: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
     if n_people:
         r = b.main_route
         peds = (
@@ -629,6 +636,7 @@ def _assemble(name: str, b: _Build, o: _Opts, seed: int, options: dict) -> Tour:
                         layouts[key] = _place_boxes(g, b, n_moved, path_xy)
                     centres[laps == lap, :n_moved] = layouts[key]
             if n_people:
+                assert peds is not None
                 start, speed, side = peds
                 m = b.main_route
                 tt = (t_global + times)[:, None]
@@ -640,6 +648,7 @@ def _assemble(name: str, b: _Build, o: _Opts, seed: int, options: dict) -> Tour:
                 close = np.linalg.norm(ped - poses[:, None, :2], axis=-1) < 0.45 * b.scale
                 ped[close] = 1e4
                 centres[:, n_moved:] = ped
+            assert shape is not None
             obstacles = Obstacles(shape=shape, centres=centres, world=obst_world, n_moved=n_moved)
         t_global += n * dt
         sessions.append(
@@ -688,7 +697,7 @@ def _assemble(name: str, b: _Build, o: _Opts, seed: int, options: dict) -> Tour:
     )
 
 
-def _wrap(a: np.ndarray) -> np.ndarray:
+def _wrap(a: np.ndarray | float) -> np.ndarray:
     return (np.asarray(a) + np.pi) % (2 * np.pi) - np.pi
 
 
@@ -987,6 +996,7 @@ def irat_like(
         radius=r,
         closed=False,
     )
+    bridges: list[list[tuple[Route, Point | None, Point | None]]]
     bridges = [[(outer, None, None)] for _ in range(3)]
     bridges.append([(outer, None, (0.0, gy * k + 4 * r)), (into_spur, (0.0, gy * k + 4 * r), None)])
     ds = speed / hz
