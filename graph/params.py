@@ -14,7 +14,7 @@ import dataclasses
 import math
 import typing
 from dataclasses import dataclass, field
-from typing import Any, ClassVar
+from typing import Any, ClassVar, TypeVar
 
 from torchratslam.graph.errors import ConfigError, unknown_name_message
 
@@ -71,6 +71,9 @@ def _coerce(key: str, value: Any, typ: type) -> Any:
     return value
 
 
+P = TypeVar("P", bound="Params")
+
+
 @dataclass(frozen=True)
 class Params:
     """Base class: type coercion and range checks for every field on construction."""
@@ -103,7 +106,7 @@ class Params:
         return [f.name for f in dataclasses.fields(cls)]
 
     @classmethod
-    def from_dict(cls, values: dict[str, Any]) -> Params:
+    def from_dict(cls: type[P], values: dict[str, Any]) -> P:
         """Build from a mapping; unknown keys raise :class:`ConfigError` with a hint."""
         known = set(cls.keys())
         for key in values:
@@ -114,7 +117,7 @@ class Params:
     def to_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)
 
-    def replace(self, **changes: Any) -> Params:
+    def replace(self: P, **changes: Any) -> P:
         return self.from_dict({**self.to_dict(), **changes})
 
 

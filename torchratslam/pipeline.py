@@ -422,7 +422,7 @@ class RatSLAM:
             :class:`RunResult`.
         """
         if hasattr(frames, "frames") and callable(frames.frames):
-            total = len(frames) if hasattr(frames, "__len__") else None
+            total = len(frames) if hasattr(frames, "__len__") else None  # type: ignore[arg-type]
             it: Iterator[Frame] = iter(frames.frames())
         else:
             total = len(frames) if hasattr(frames, "__len__") else None  # type: ignore[arg-type]

@@ -12,7 +12,7 @@ import json
 import os
 from collections.abc import Iterator
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
@@ -28,7 +28,7 @@ PRESETS: dict[str, dict[str, float]] = {
 }
 
 # the paper's robot experiment (Section 3.4) and Rawseeds results, for the figures
-PAPER = {
+PAPER: dict[str, Any] = {
     "nodes_per_lap": [24, 6, 6, 6, 5],
     "localisation_with_odometry": {"rawseeds": 0.974, "robot": 0.975},
     "localisation_without_odometry": {"rawseeds": 0.839, "robot": 0.86},
@@ -113,7 +113,7 @@ def laser_frames(session: Any, start: int, stop: int) -> Iterator[Frame]:
             vtrans=vt,
             vrot=vr,
             dt=dt,
-            pose=tuple(float(v) for v in session.poses[k]),
+            pose=cast(tuple[float, float, float], tuple(float(v) for v in session.poses[k])),
             scans=session.scans(k),
             meta={"lap": int(session.laps[k])},
         )
@@ -246,7 +246,9 @@ def main(args: argparse.Namespace) -> int:
     }
     atomic_write_text(out / "metrics.json", json.dumps(metrics, indent=2) + "\n")
     state = result.model.get_state()
-    arrays = {k.replace("/", "__"): np.asarray(v) for k, v in state.items() if k != "params"}
+    arrays: dict[str, Any] = {
+        k.replace("/", "__"): np.asarray(v) for k, v in state.items() if k != "params"
+    }
     tmp = out / ".state.tmp.npz"
     np.savez(tmp, **arrays, node_xy=result.node_xy)
     os.replace(tmp, out / "state.npz")

@@ -194,7 +194,8 @@ def _draw(ax: Any, poses: np.ndarray, links: np.ndarray, colour: str, label: str
     e = np.asarray(links, np.int64).reshape(-1, 2)
     if e.size:
         ok = (e >= 0).all(1) & (e < len(p)).all(1)
-        ax.add_collection(LineCollection(p[e[ok]][:, :, :2], colors=colour, linewidths=0.7))
+        segments: Any = p[e[ok]][:, :, :2]
+        ax.add_collection(LineCollection(segments, colors=colour, linewidths=0.7))
     ax.scatter(p[:, 0], p[:, 1], s=5, color=colour, label=f"{label} ({len(p)})", zorder=3)
 
 
@@ -250,7 +251,7 @@ def write_figures(result: dict[str, Any], out: Path) -> list[Path]:
         _draw(ax, st.exp_pose[:n_l], lk[(lk < n_l).all(1)], SESSION_COLOURS[0], "loaded")
         part = np.r_[snap["merged"][m0["loaded_exp"]][None], st.exp_pose[n_l:]]
         _draw(ax, part, np.zeros((0, 2)), SESSION_COLOURS[1], "partial, transformed")
-        ax.scatter(
+        ax.scatter(  # type: ignore[misc]
             *st.exp_pose[m0["loaded_exp"], :2],
             s=120,
             facecolors="none",

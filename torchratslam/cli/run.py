@@ -339,13 +339,13 @@ def main(args: argparse.Namespace) -> int:
         from torchratslam.multisession.session import MultiSessionRatSLAM
 
         stored = [load_state(p) for p in args.load]
-        slam = MultiSessionRatSLAM(config, stored, **kwargs)
+        slam: Any = MultiSessionRatSLAM(config, stored, **kwargs)
     else:
         slam = RatSLAM(config, **kwargs)
     result = slam.run(data, max_frames=args.max_frames, progress=not args.no_progress)
     if result.frames == 0:
         raise InputError(f"{args.data}: no frames were read; check the dataset")
-    extra = {"data": str(args.data), "config": str(args.config)}
+    extra: dict[str, Any] = {"data": str(args.data), "config": str(args.config)}
     if odometry_label:
         extra["odometry"] = odometry_label
     if args.load:

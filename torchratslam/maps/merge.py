@@ -250,6 +250,7 @@ def merge_maps(
             n_a = getattr(loaded, PER_ENTITY[prefix]).shape[0]
             n_b = getattr(partial, PER_ENTITY[prefix]).shape[0]
             ref = a if a is not None else b
+            assert ref is not None  # the key is in one of the two maps
             if a is None:
                 a = np.zeros((n_a, *ref.shape[1:]), ref.dtype)
             if b is None:
@@ -267,7 +268,7 @@ def merge_maps(
         src = partial.template_pc[z]
         roll = np.rint(src + delta) - np.rint(src)
         extra[PC_BEST] = np.mod(np.asarray(extra[PC_BEST], np.float64) + roll, dims)
-    ids = {k: int(getattr(partial, k)) for k in INT_FIELDS}
+    ids: dict[str, Any] = {k: int(getattr(partial, k)) for k in INT_FIELDS}
     ids["current_vt"] = int(_apply(tmap, ids["current_vt"]))
     ids["prev_vt"] = int(_apply(tmap, ids["prev_vt"]))
     ids["current_exp"] = int(_apply(emap, ids["current_exp"])) if ids["current_exp"] >= 0 else e_u

@@ -163,7 +163,8 @@ def read_reference(directory: str | Path, config: Any = None) -> MapState:
             f"template_x_size x template_y_size = {tx} x {ty} = {tx * ty}; use "
             "the config the map was made with"
         )
-    tpl, means = [], []
+    tpl: list[np.ndarray] = []
+    means: list[float] = []
     while not lv.at_end():
         tid = lv.integer()
         if tid != len(tpl):
@@ -177,7 +178,8 @@ def read_reference(directory: str | Path, config: Any = None) -> MapState:
     n = len(tpl)
     # --- template -> pose cells
     pt = _Lines(d / FILES[1])
-    t_pc, t_decay = [], []
+    t_pc: list[Any] = []
+    t_decay: list[Any] = []
     while not pt.at_end():
         tid = pt.integer()
         if tid != len(t_pc):
@@ -197,7 +199,8 @@ def read_reference(directory: str | Path, config: Any = None) -> MapState:
     cur_exp, prev_exp = pe.tail()
     # --- experiences
     ex = _Lines(d / FILES[3])
-    poses, links_from_lists = [], []
+    poses: list[Any] = []
+    links_from_lists: list[Any] = []
     while not ex.at_end():
         eid = ex.integer()
         if eid != len(poses):

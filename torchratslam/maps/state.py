@@ -38,7 +38,7 @@ import re
 import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
@@ -208,7 +208,7 @@ class MapState:
 
     def normalised(self) -> MapState:
         """A copy with canonical dtypes (int64 ids, float64 geometry, contiguous arrays)."""
-        out = {}
+        out: dict[str, Any] = {}
         for name, (kind, _) in ARRAY_FIELDS.items():
             a = np.asarray(getattr(self, name))
             if kind == "i":
@@ -222,7 +222,7 @@ class MapState:
             config=dict(self.config),
             extra={k: np.ascontiguousarray(v).copy() for k, v in self.extra.items()},
             scalars=dict(self.scalars),
-            **{k: int(getattr(self, k)) for k in INT_FIELDS},
+            **cast(dict[str, Any], {k: int(getattr(self, k)) for k in INT_FIELDS}),
             **out,
         )
 
@@ -323,8 +323,8 @@ class MapState:
                 f"pose-cell activity has shape {self.activity.shape}, but the map's config "
                 f"says (pc_dim_th, pc_dim_xy, pc_dim_xy) = {(pcs[2], pcs[1], pcs[0])}"
             )
-        ty = int(self.config.get("template_y_size", self.templates.shape[1]))
-        tx = int(self.config.get("template_x_size", self.templates.shape[2]))
+        ty = int(self.config.get("template_y_size", int(self.templates.shape[1])))
+        tx = int(self.config.get("template_x_size", int(self.templates.shape[2])))
         if self.templates.shape[1:] != (ty, tx):
             raise bad(
                 f"templates have shape {self.templates.shape[1:]} (Y, X), but the map's "
@@ -406,7 +406,7 @@ def save_map(state: MapState, directory: str | Path) -> Path:
                 "overwrite it: choose an empty or new directory"
             )
     target.parent.mkdir(parents=True, exist_ok=True)
-    arrays = state.arrays()
+    arrays: dict[str, Any] = state.arrays()
     meta = {
         "format": FORMAT_NAME,
         "version": FORMAT_VERSION,
@@ -483,9 +483,9 @@ def load_map(directory: str | Path) -> MapState:
                 f"{src}: array {k!r} is {a.dtype}{list(a.shape)} but state.json "
                 f"declares {spec.get('dtype')}{spec.get('shape')}"
             )
-    missing = [k for k in ARRAY_FIELDS if k not in arrays]
-    if missing:
-        raise MapFormatError(f"{src}: required arrays missing: {', '.join(missing)}")
+    absent = [k for k in ARRAY_FIELDS if k not in arrays]
+    if absent:
+        raise MapFormatError(f"{src}: required arrays missing: {', '.join(absent)}")
     ids = meta["ids"]
     for k in INT_FIELDS:
         if not isinstance(ids.get(k), int):

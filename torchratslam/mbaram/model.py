@@ -48,7 +48,7 @@ from __future__ import annotations
 import math
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any, ClassVar
+from typing import Any, ClassVar, cast
 
 import networkx as nx
 import numpy as np
@@ -775,7 +775,7 @@ class _Odometry:
             if self.mode == "integrated":
                 pose = self.integ.step(f.vtrans, f.vrot, f.dt)
             else:
-                pose = f.pose
+                pose = cast(tuple[float, float, float], f.pose)  # checked above
             true = f.pose if f.pose is not None else pose
             yield frame_inputs(f.scans, pose, self.params), true
 

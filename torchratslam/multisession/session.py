@@ -100,7 +100,7 @@ class MultiSessionRatSLAM:
         self.session = session
         self.keep_snapshots = keep_snapshots
         self.merges: list[dict[str, Any]] = []
-        self.snapshots: list[dict[str, np.ndarray]] = []
+        self.snapshots: list[dict[str, Any]] = []
         self.pending: list[int] = list(range(len(self.stored)))
         self._banks = [self._bank_of(s) for s in self.stored]
 

@@ -37,7 +37,7 @@ import json
 import math
 from collections.abc import Iterator
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import cv2
 import numpy as np
@@ -244,7 +244,9 @@ class DirectoryReader(Reader):
         gt = self.path / "groundtruth.csv"
         self._gt = read_groundtruth_csv(gt) if gt.is_file() else None
         self.meta = _read_meta(self.path / "meta.json")
-        camera = self.meta.get("camera") if isinstance(self.meta.get("camera"), dict) else {}
+        camera: dict[str, Any] = (
+            self.meta.get("camera") if isinstance(self.meta.get("camera"), dict) else {}  # type: ignore[assignment]
+        )
         self.mirrored = "counter-clockwise" in str(camera.get("columns", ""))
 
     def __len__(self) -> int:
@@ -452,7 +454,7 @@ class BagReader(Reader):
                 if self.has_odometry:
                     conns = [c for c in reader.connections if c.topic == odom_topic]
                     for conn, ts, raw in reader.messages(connections=conns):
-                        msg = reader.deserialize(raw, conn.msgtype)
+                        msg: Any = reader.deserialize(raw, conn.msgtype)
                         t_odo.append(_stamp(msg, ts))
                         v.append(float(msg.twist.twist.linear.x))
                         w.append(float(msg.twist.twist.angular.z))
@@ -461,7 +463,7 @@ class BagReader(Reader):
                     conns = [c for c in reader.connections if c.topic == groundtruth_topic]
                     for conn, ts, raw in reader.messages(connections=conns):
                         msg = reader.deserialize(raw, conn.msgtype)
-                        p = msg.pose
+                        p = cast(Any, msg).pose
                         gt.append(
                             (_stamp(msg, ts), p.position.x, p.position.y, _yaw(p.orientation))
                         )

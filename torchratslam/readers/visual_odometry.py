@@ -140,7 +140,7 @@ class VisualOdometry:
         self._prev_trans: np.ndarray | None = None
         self._prev_rot: np.ndarray | None = None
 
-    def on_image(self, image: np.ndarray) -> tuple[float, float]:
+    def on_image(self, image: np.ndarray | None) -> tuple[float, float]:
         """Speed and turn rate since the previous image.
 
         Args:
@@ -163,7 +163,11 @@ class VisualOdometry:
         rot = intensity_profile(
             image, p.vrot_image_x_min, p.vrot_image_x_max, p.vrot_image_y_min, p.vrot_image_y_max
         )
-        if self._prev_trans is None or self._prev_trans.shape != trans.shape:
+        if (
+            self._prev_trans is None
+            or self._prev_rot is None
+            or self._prev_trans.shape != trans.shape
+        ):
             self._prev_trans, self._prev_rot = trans, rot
             return 0.0, 0.0
         _, trans_diff = best_shift(trans, self._prev_trans, self.max_shift)

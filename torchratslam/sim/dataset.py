@@ -24,6 +24,7 @@ import os
 import shutil
 import tempfile
 from pathlib import Path
+from typing import Any
 from urllib.parse import parse_qsl
 
 import cv2
@@ -158,7 +159,8 @@ def write_dataset(
             fmt="%.9g",
         )
         if scans:
-            np.savez_compressed(tmp / "scans.npz", **{k: np.stack(v) for k, v in scans.items()})
+            stacked: dict[str, Any] = {k: np.stack(v) for k, v in scans.items()}
+            np.savez_compressed(tmp / "scans.npz", **stacked)
         meta = {
             "format": "torchratslam-dataset",
             "version": FORMAT_VERSION,

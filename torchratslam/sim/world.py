@@ -193,7 +193,7 @@ def _smooth_strip(rng: np.random.Generator, rows: int, cols: int, scale: float) 
     """Random ``smooth`` panels 3-7 m wide, each blended into the next over 0.6 m (both
     times ``scale``)."""
     blend = max(1, round(0.6 * scale * TEX_RES))
-    widths = []
+    widths: list[int] = []
     while sum(widths) < cols:
         widths.append(max(4, round(rng.uniform(3.0, 7.0) * scale * TEX_RES)))
     out = np.empty((rows, sum(widths) + blend), np.float32)
@@ -288,7 +288,7 @@ class World:
 
         s = self.segments.reshape(-1, 2, 2)
         cols = [color if k == "wall" else obstacle_color for k in self.kinds] or color
-        ax.add_collection(LineCollection(s, colors=cols, linewidths=lw))
+        ax.add_collection(LineCollection(s, colors=cols, linewidths=lw))  # type: ignore[arg-type]
         xmin, ymin, xmax, ymax = self.bounds
         pad = 0.05 * max(xmax - xmin, ymax - ymin)
         ax.set_xlim(xmin - pad, xmax + pad)

@@ -113,7 +113,12 @@ def plot_map(
     if e.size and p.size:
         ok = (e >= 0).all(1) & (e < p.shape[0]).all(1)
         ax.add_collection(
-            LineCollection(p[e[ok]][:, :, :2], colors="tab:blue", linewidths=0.8, zorder=2)
+            LineCollection(
+                p[e[ok]][:, :, :2],  # type: ignore[arg-type]
+                colors="tab:blue",
+                linewidths=0.8,
+                zorder=2,
+            )
         )
     if p.size:
         ax.scatter(p[:, 0], p[:, 1], s=6, color="tab:red", zorder=3, label=f"{len(p)} experiences")
@@ -144,7 +149,7 @@ def plot_pose_cells(
     try:  # the pose-cell module's own figure
         from torchratslam.viz.pose_cells import plot_activity
     except ImportError:
-        plot_activity = None
+        plot_activity = None  # type: ignore[assignment]
     if plot_activity is not None:
         plot_activity(activity, path, centres=centres, title=title)
         return Path(path)
