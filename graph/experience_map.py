@@ -33,6 +33,7 @@ Example:
 from __future__ import annotations
 
 import itertools
+import logging
 import math
 from typing import Any, Protocol
 
@@ -56,6 +57,8 @@ from torchratslam.graph.params import ExperienceMapParams
 from torchratslam.graph.posegraph import PoseGraph
 
 __all__ = ["ExperienceMap", "Route"]
+
+log = logging.getLogger(__name__)
 
 STATE_FORMAT = "torchratslam.graph.experience_map"
 STATE_VERSION = 1
@@ -637,6 +640,13 @@ class ExperienceMap:
         self._version += 1
         if getattr(backend, "last_converged", False):
             self._fixed_at = (self._version, id(self.params), id(backend))
+        elif alpha and log.isEnabledFor(logging.DEBUG):
+            log.debug(
+                "relaxation: %d passes of %r did not reach a fixed point (%d experiences)",
+                loops,
+                self.params.exp_backend,
+                self._n,
+            )
 
     # -------------------------------------------------------------- queries
     def links(self) -> dict[str, np.ndarray]:

@@ -41,6 +41,7 @@ from __future__ import annotations
 
 import importlib
 import itertools
+import logging
 import queue
 import threading
 import time
@@ -60,6 +61,8 @@ from torchratslam.registry import EXPERIENCE_MAPS, LOCAL_VIEWS, ODOMETRY, POSE_C
 from torchratslam.timing import TimeLogger
 
 __all__ = ["QUEUE_SIZE", "RatSLAM", "RunResult", "StepResult"]
+
+log = logging.getLogger(__name__)
 
 QUEUE_SIZE = 10
 """Capacity of the queues between the pipelined mode's worker threads (xRatSLAM's)."""
@@ -424,6 +427,14 @@ class RatSLAM:
         if hasattr(frames, "frames") and callable(frames.frames):
             total = len(frames) if hasattr(frames, "__len__") else None  # type: ignore[arg-type]
             it: Iterator[Frame] = iter(frames.frames())
+            if not getattr(frames, "has_odometry", True) and isinstance(
+                self.odometry, GivenOdometry
+            ):
+                log.warning(
+                    "%s carries no odometry but the odometry source is 'given' (zero "
+                    "motion); build RatSLAM(..., odometry='visual') to estimate it",
+                    getattr(frames, "name", "the data"),
+                )
         else:
             total = len(frames) if hasattr(frames, "__len__") else None  # type: ignore[arg-type]
             it = iter(frames)

@@ -16,12 +16,15 @@ model (without priors, so a rigid motion of the whole map costs nothing).
 
 from __future__ import annotations
 
+import logging
 from collections.abc import Sequence
 
 import gtsam
 import numpy as np
 from torchratslam.graph.errors import ConfigError, GraphError
 from torchratslam.graph.posegraph import PoseGraph, UnionFind, wrap_angle
+
+log = logging.getLogger(__name__)
 
 DEFAULT_SIGMAS = (1.0, 1.0, 1.0)
 DEFAULT_PRIOR_SIGMA = 1e-4
@@ -175,6 +178,13 @@ class GtsamBackend:
         except RuntimeError as exc:
             raise GraphError(f"gtsam LM failed: {exc}") from None
         self.iterations = opt.iterations()
+        if self.iterations >= self.params.getMaxIterations():
+            log.warning(
+                "gtsam LM stopped at its limit of %d iterations before converging "
+                "(error %.6g); raise max_iterations",
+                self.iterations,
+                opt.error(),
+            )
         return _poses_from(result, pg.num_poses)
 
 
@@ -272,6 +282,8 @@ class ISAM2Backend:
             # new nodes not connected to older ones start components of their own
             prior_rows = [r for r in range(self._n, pg.num_poses) if self._uf.find(r) == r]
         else:
+            if self._isam is not None:
+                log.debug("iSAM2: the graph changed other than by appending; rebuilding")
             self.rebuilds += 1
             self.reset()
             self._isam = self._new_isam()

@@ -25,6 +25,7 @@ Everything is vectorised: the cost is linear in the sizes of both maps (Section 
 from __future__ import annotations
 
 import dataclasses
+import logging
 import math
 from dataclasses import dataclass
 from typing import Any
@@ -42,6 +43,8 @@ from torchratslam.maps.state import (
 )
 
 __all__ = ["MergeResult", "merge_maps", "pc_distance", "pick_experience", "shift_activity"]
+
+log = logging.getLogger(__name__)
 
 
 def _wrap(a: np.ndarray | float) -> np.ndarray | float:
@@ -311,4 +314,15 @@ def merge_maps(
         "experiences_added": int(keep_e.sum()),
         "links_added": int(keep_l.sum()),
     }
+    log.info(
+        "merged maps at loaded template %d / partial template %d: %d templates, %d "
+        "experiences and %d links added; pose-cell shift %s%s",
+        u,
+        z,
+        info["templates_added"],
+        info["experiences_added"],
+        info["links_added"],
+        [round(float(v), 3) for v in delta],
+        "" if shift_pose_cells else " (not applied)",
+    )
     return MergeResult(state=dataclasses.replace(merged), info=info)

@@ -23,6 +23,7 @@ Example:
 from __future__ import annotations
 
 import dataclasses
+import logging
 import time
 from collections.abc import Callable, Iterable
 from typing import Any
@@ -41,6 +42,8 @@ from torchratslam.maps.state import (
 from torchratslam.pipeline import RatSLAM, RunResult, StepResult
 
 __all__ = ["MultiSessionRatSLAM"]
+
+log = logging.getLogger(__name__)
 
 
 class MultiSessionRatSLAM:
@@ -249,6 +252,15 @@ class MultiSessionRatSLAM:
             "time_s": time.perf_counter() - t0,
         }
         self.merges.append(rec)
+        log.info(
+            "frame %d: merged stored map %r (template %d matched, error %.4g) into the "
+            "running map; %d experiences now",
+            rec["frame"],
+            rec["map_name"],
+            rec["loaded_template"],
+            rec["error"],
+            self.slam.counts()[1],
+        )
         return rec
 
     # ------------------------------------------------------------------ state

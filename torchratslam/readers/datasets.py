@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import csv
 import json
+import logging
 import math
 from collections.abc import Iterator
 from pathlib import Path
@@ -56,6 +57,8 @@ __all__ = [
     "read_groundtruth_csv",
     "read_odometry_csv",
 ]
+
+log = logging.getLogger(__name__)
 
 IMAGE_EXTENSIONS = (".png", ".jpg", ".jpeg", ".bmp", ".pgm", ".ppm", ".tif", ".tiff")
 VIDEO_EXTENSIONS = (".mp4", ".avi", ".mkv", ".mov", ".mpg", ".mpeg", ".webm", ".m4v")
@@ -221,7 +224,16 @@ class DirectoryReader(Reader):
         fdir = self.path / "frames"
         if not fdir.is_dir():
             raise InputError(f"{self.path}: no frames/ folder; put the images in {fdir}")
-        self.files = sorted(p for p in fdir.iterdir() if p.suffix.lower() in IMAGE_EXTENSIONS)
+        entries = sorted(fdir.iterdir())
+        self.files = [p for p in entries if p.suffix.lower() in IMAGE_EXTENSIONS]
+        if len(self.files) < len(entries):
+            other = [p.name for p in entries if p.suffix.lower() not in IMAGE_EXTENSIONS]
+            log.info(
+                "%s: skipped %d entries that are not images (%s)",
+                fdir,
+                len(other),
+                ", ".join(other[:3]) + (", ..." if len(other) > 3 else ""),
+            )
         if not self.files:
             raise InputError(f"{fdir}: no images ({', '.join(IMAGE_EXTENSIONS)})")
         self.color = color
@@ -241,6 +253,7 @@ class DirectoryReader(Reader):
             self.vtrans = np.zeros(len(self.files))
             self.vrot = np.zeros(len(self.files))
             self.has_odometry = False
+            log.info("%s: no odometry.csv; timestamps at %g frames/s, no odometry", self.path, rate)
         gt = self.path / "groundtruth.csv"
         self._gt = read_groundtruth_csv(gt) if gt.is_file() else None
         self.meta = _read_meta(self.path / "meta.json")
@@ -310,6 +323,9 @@ class VideoReader(Reader):
             self.vtrans = np.zeros_like(self.t)
             self.vrot = np.zeros_like(self.t)
             self.has_odometry = False
+            log.info(
+                "%s: no odometry CSV; timestamps at %g frames/s, no odometry", self.path, self.fps
+            )
         self._gt = read_groundtruth_csv(groundtruth) if groundtruth is not None else None
 
     def __len__(self) -> int:
@@ -488,6 +504,9 @@ class BagReader(Reader):
             self.vtrans = _interval_means(t_img, t_o, v_o)
             self.vrot = _interval_means(t_img, t_o, w_o)
         else:
+            log.info(
+                "%s: no odometry topic %r; the frames carry no odometry", self.path, odom_topic
+            )
             self.vtrans = np.zeros_like(t_img)
             self.vrot = np.zeros_like(t_img)
         self._gt = np.asarray(sorted(gt), dtype=np.float64) if gt else None
