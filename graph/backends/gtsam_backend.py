@@ -21,7 +21,8 @@ from collections.abc import Sequence
 import gtsam
 import numpy as np
 from torchratslam.graph.errors import ConfigError, GraphError
-from torchratslam.graph.posegraph import PoseGraph, UnionFind, wrap_angle
+from torchratslam.graph.geometry import wrap_angle
+from torchratslam.graph.posegraph import PoseGraph, UnionFind
 
 DEFAULT_SIGMAS = (1.0, 1.0, 1.0)
 DEFAULT_PRIOR_SIGMA = 1e-4

@@ -55,6 +55,7 @@ import numpy as np
 import torch
 
 from torchratslam.graph.errors import ConfigError, InputError, MapFormatError
+from torchratslam.graph.geometry import wrap_angle
 from torchratslam.graph.params import Params, param
 from torchratslam.messages import Frame
 
@@ -142,10 +143,6 @@ class MatchResult:
     best: int = -1
 
 
-def _wrap(a: torch.Tensor) -> torch.Tensor:
-    return torch.remainder(a + math.pi, 2.0 * math.pi) - math.pi
-
-
 class _Channel:
     """Node storage of one channel, with room that doubles as nodes are added."""
 
@@ -183,7 +180,7 @@ class _Channel:
     def diff(self, x: torch.Tensor, n: int) -> torch.Tensor:
         d = x - self.mean[:n]
         if self.has_ang:
-            d = torch.where(self.ang, _wrap(d), d)
+            d = torch.where(self.ang, wrap_angle(d), d)
         return d
 
     def maha(self, d: torch.Tensor, n: int) -> torch.Tensor:
@@ -484,7 +481,7 @@ class MBARAM:
         s2 = self.params.sigma_init_sq
         for k, ch in self._ch.items():
             v = x[k]
-            ch.mean[j] = torch.where(ch.ang, _wrap(v), v) if ch.has_ang else v
+            ch.mean[j] = torch.where(ch.ang, wrap_angle(v), v) if ch.has_ang else v
             if ch.full:
                 ch.cov[j] = s2 * torch.eye(ch.dim, dtype=self.dtype, device=self.device)
                 ch.chol[j] = math.sqrt(s2) * torch.eye(ch.dim, dtype=self.dtype, device=self.device)
@@ -506,10 +503,10 @@ class MBARAM:
             floor = ch.floor
             d = x[k] - ch.mean[j]
             if ch.has_ang:
-                d = torch.where(ch.ang, _wrap(d), d)
+                d = torch.where(ch.ang, wrap_angle(d), d)
             mu = ch.mean[j] + b * d  # Eq. 9
             if ch.has_ang:
-                mu = torch.where(ch.ang, _wrap(mu), mu)
+                mu = torch.where(ch.ang, wrap_angle(mu), mu)
             dn = a * d  # x - mu_new
             if ch.full:
                 cov = a * ch.cov[j] + b * torch.outer(dn, dn)  # Eq. 10 (full)
@@ -543,12 +540,11 @@ class MBARAM:
         nu, nv = self.graph.nodes[u], self.graph.nodes[v]
         dx, dy = nv["x"] - nu["x"], nv["y"] - nu["y"]
         angle = math.atan2(dy, dx)
-        wrap = lambda t: math.remainder(t, 2.0 * math.pi)  # noqa: E731
         self.graph.edges[u, v].update(
             d=math.hypot(dx, dy),
             angle=angle,
-            heading=wrap(angle - nu["th"]),
-            facing=wrap(nv["th"] - nu["th"]),
+            heading=wrap_angle(angle - nu["th"]),
+            facing=wrap_angle(nv["th"] - nu["th"]),
         )
 
     def _link(self, prev: int, node: int) -> None:
@@ -641,7 +637,7 @@ class OdometryIntegrator:
         x, y, th = self.pose
         mid = th + 0.5 * vrot * dt
         x, y = x + vtrans * dt * math.cos(mid), y + vtrans * dt * math.sin(mid)
-        self.pose = (x, y, math.remainder(th + vrot * dt, 2.0 * math.pi))
+        self.pose = (x, y, wrap_angle(th + vrot * dt))
         return self.pose
 
 
