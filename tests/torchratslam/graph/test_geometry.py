@@ -73,7 +73,9 @@ def test_wrap_boundaries_and_types():
     a = RNG.uniform(-20, 20, 50)
     arr = wrap_angle(a)
     assert [wrap_angle(float(v)) for v in a] == arr.tolist()
-    assert [wrap_angle(float(v), include_pi=True) for v in a] == wrap_angle(a, include_pi=True).tolist()
+    assert [wrap_angle(float(v), include_pi=True) for v in a] == wrap_angle(
+        a, include_pi=True
+    ).tolist()
     t = wrap_angle(torch.tensor(a))
     assert isinstance(t, torch.Tensor) and t.dtype == torch.float64
     assert t.tolist() == arr.tolist()
