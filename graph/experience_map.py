@@ -35,7 +35,7 @@ from __future__ import annotations
 
 import itertools
 import math
-from typing import Any, Protocol
+from typing import Any
 
 import networkx as nx
 import numpy as np
@@ -53,20 +53,12 @@ from torchratslam.graph.geometry import inverse, signed_delta, wrap_angle
 from torchratslam.graph.messages import Action, ActionKind
 from torchratslam.graph.params import ExperienceMapParams
 from torchratslam.graph.posegraph import PoseGraph
+from torchratslam.graph.protocols import RelaxationBackend
 
 __all__ = ["ExperienceMap", "Route"]
 
 STATE_FORMAT = "torchratslam.graph.experience_map"
 STATE_VERSION = 1
-
-
-class RelaxationBackend(Protocol):
-    """What :meth:`ExperienceMap.iterate` needs from a backend.
-
-    See ``torchratslam.graph.backends``.
-    """
-
-    def relax(self, pg: PoseGraph, *, passes: int, correction: float = 0.5) -> np.ndarray: ...
 
 
 def _grow(a: np.ndarray, need: int) -> np.ndarray:
