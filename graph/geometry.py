@@ -12,7 +12,8 @@ One home for:
   translation, rotation matrix, ``apply``); :func:`apply_se2`; :func:`ate_rmse`;
 * ring distances on the pose-cell torus -- :func:`ring_distance`, :func:`pc_distance`;
 * dead reckoning -- :func:`dead_reckoning` integrates ``(vtrans, vrot, dt)`` as the
-  experience map does (turn, then step along the new heading); :func:`chain_poses`
+  experience map does (turn, then step along the new heading), :func:`odometry_step`
+  is one such step (or a midpoint step) for online integrators; :func:`chain_poses`
   composes a chain of relative SE(2) steps (a graph's odometry edges).
 """
 
@@ -40,6 +41,7 @@ __all__ = [
     "compose",
     "dead_reckoning",
     "inverse",
+    "odometry_step",
     "pc_distance",
     "ring_distance",
     "signed_delta",
@@ -335,6 +337,25 @@ def dead_reckoning(
     x = start[0] + np.cumsum(step * np.cos(th))
     y = start[1] + np.cumsum(step * np.sin(th))
     return np.column_stack([x, y, wrap_angle(th)])
+
+
+def odometry_step(
+    pose: Sequence[float], vtrans: float, vrot: float, dt: float, *, midpoint: bool = False
+) -> tuple[float, float, float]:
+    """One step of dead reckoning for an online integrator (heading wrapped to [-pi, pi)).
+
+    The default turns first and then steps along the new heading, as
+    :func:`dead_reckoning` (the experience map's rule); ``midpoint=True`` steps along
+    the mean heading of the interval (MBARAM's odometry channel).
+
+    Args:
+        pose: ``(x, y, th)`` before the step.
+        vtrans, vrot, dt: speed (m/s), turn rate (rad/s) and interval (s).
+    """
+    x, y, th = (float(v) for v in pose)
+    heading = th + 0.5 * vrot * dt if midpoint else th + vrot * dt
+    x, y = x + vtrans * dt * math.cos(heading), y + vtrans * dt * math.sin(heading)
+    return x, y, wrap_angle(th + vrot * dt)
 
 
 def chain_poses(steps: np.ndarray, start: Sequence[float] = (0.0, 0.0, 0.0)) -> np.ndarray:

@@ -55,7 +55,7 @@ import numpy as np
 import torch
 
 from torchratslam.graph.errors import ConfigError, InputError, MapFormatError
-from torchratslam.graph.geometry import wrap_angle
+from torchratslam.graph.geometry import odometry_step, wrap_angle
 from torchratslam.graph.params import Params, param
 from torchratslam.messages import Frame
 
@@ -634,10 +634,7 @@ class OdometryIntegrator:
 
     def step(self, vtrans: float, vrot: float, dt: float) -> tuple[float, float, float]:
         """Advance by one interval (turn half, move, turn half) and return the pose."""
-        x, y, th = self.pose
-        mid = th + 0.5 * vrot * dt
-        x, y = x + vtrans * dt * math.cos(mid), y + vtrans * dt * math.sin(mid)
-        self.pose = (x, y, wrap_angle(th + vrot * dt))
+        self.pose = odometry_step(self.pose, vtrans, vrot, dt, midpoint=True)
         return self.pose
 
 

@@ -20,6 +20,7 @@ from torchratslam.graph.geometry import (
     compose,
     dead_reckoning,
     inverse,
+    odometry_step,
     pc_distance,
     ring_distance,
     signed_delta,
@@ -205,3 +206,24 @@ def test_chain_poses_equals_composing_one_step_at_a_time():
         np.testing.assert_allclose(got[k, :2], p[:2], atol=1e-9)
         assert signed_delta(got[k, 2], p[2]) == pytest.approx(0.0, abs=1e-9)
     assert chain_poses(np.zeros((0, 3))).shape == (0, 3)
+
+
+def test_odometry_steps_follow_dead_reckoning_and_close_a_circle():
+    n = 40
+    v, w, dt = RNG.random(n), RNG.normal(size=n), RNG.random(n) * 0.3
+    pose = (1.0, -2.0, 0.5)
+    want = dead_reckoning(v, w, dt, start=pose)
+    for k in range(n):
+        pose = odometry_step(pose, v[k], w[k], dt[k])
+        assert pose[:2] == pytest.approx(tuple(want[k, :2]), abs=1e-9)
+        assert signed_delta(pose[2], want[k, 2]) == pytest.approx(0.0, abs=1e-12)
+        assert -PI <= pose[2] < PI
+    # constant speed and turn rate: equal chords turning by equal angles close the loop
+    for midpoint in (False, True):
+        pose = (3.0, 4.0, 1.0)
+        for _ in range(36):
+            pose = odometry_step(pose, 2.0, 2 * PI / 36, 1.0, midpoint=midpoint)
+        assert pose == pytest.approx((3.0, 4.0, 1.0), abs=1e-9)
+    # the midpoint step goes along the mean heading
+    x, y, _ = odometry_step((0.0, 0.0, 0.0), 1.0, 1.0, 1.0, midpoint=True)
+    assert (x, y) == pytest.approx((math.cos(0.5), math.sin(0.5)))
