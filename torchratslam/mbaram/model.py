@@ -773,6 +773,72 @@ class _Odometry:
             yield frame_inputs(f.scans, pose, self.params), true
 
 
+def _learn(
+    model: MBARAM, odo: _Odometry, map_laps: Sequence[Iterable[Frame]], *, keep: bool
+) -> tuple[np.ndarray, np.ndarray, list[int], list]:
+    """Learn the map lap by lap.
+
+    Returns:
+        The true positions ``(F, 2)``, the winning node of every frame ``(F,)``, the
+        nodes added per lap and (``keep``) the frames' inputs for a replay.
+    """
+    path, winners, per_lap, replay = [], [], [], []
+    for lap in map_laps:
+        before = len(model)
+        for x, true in odo(lap):
+            winners.append(model.learn(x).node)
+            path.append(true[:2])
+            if keep:
+                replay.append((0, x, true))
+        per_lap.append(len(model) - before)
+    if not winners:
+        raise InputError("MBARAM got no frames to map")
+    return np.asarray(path, float), np.asarray(winners), per_lap, replay
+
+
+def _node_positions(n: int, path: np.ndarray, winners: np.ndarray) -> np.ndarray:
+    """Each node's place in the true frame: the mean true position of the frames it won
+    (its odometry-channel mean when the odometry is the ground truth).
+
+    Shape:
+        path: ``(F, 2)``; winners: ``(F,)``; returns ``(n, 2)``.
+    """
+    node_xy = np.zeros((n, 2))
+    np.add.at(node_xy, winners, path)
+    node_xy /= np.maximum(np.bincount(winners, minlength=n), 1)[:, None]
+    return node_xy
+
+
+def _localise(
+    model: MBARAM, node_xy: np.ndarray, replay: list
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Localise every replayed frame with all channels and with the lasers only.
+
+    Returns:
+        True positions ``(L, 2)``, lap of each ``(L,)``, and the positions of the
+        winning nodes with and without odometry ``(L, 2)`` (NaN where none won).
+    """
+    loc_true, loc_lap, with_xy, without_xy = [], [], [], []
+    nan2 = np.array([np.nan, np.nan])
+    for i, x, true in replay:
+        loc_true.append(true[:2])
+        loc_lap.append(i)
+        r = model.localise(x)
+        with_xy.append(node_xy[r.node] if r.node >= 0 else nan2)
+        r = model.localise(x, LASER_CHANNELS)
+        without_xy.append(node_xy[r.node] if r.node >= 0 else nan2)
+    return (
+        np.asarray(loc_true, float).reshape(-1, 2),
+        np.asarray(loc_lap, np.int64),
+        np.reshape(with_xy, (-1, 2)),
+        np.reshape(without_xy, (-1, 2)),
+    )
+
+
+def _rate(ok: np.ndarray) -> float:
+    return float(ok.mean()) if len(ok) else float("nan")
+
+
 def run_mbaram(
     map_laps: Sequence[Iterable[Frame]],
     loc_laps: Sequence[Iterable[Frame]] = (),
@@ -802,55 +868,26 @@ def run_mbaram(
     params = params if params is not None else MBARAMParams()
     model = MBARAM(params, dtype=dtype)
     odo = _Odometry(params, odometry)
-    path, winners, per_lap, replay = [], [], [], []
-    for lap in map_laps:
-        before = len(model)
-        for x, true in odo(lap):
-            winners.append(model.learn(x).node)
-            path.append(true[:2])
-            if not loc_laps:
-                replay.append((0, x, true))
-        per_lap.append(len(model) - before)
-    if not winners:
-        raise InputError("MBARAM got no frames to map")
-    path_a, win_a = np.asarray(path, float), np.asarray(winners)
-    # each node's place in the true frame: the mean true position of the frames it won
-    # (its odometry-channel mean when the odometry is the ground truth)
-    node_xy = np.zeros((len(model), 2))
-    np.add.at(node_xy, win_a, path_a)
-    node_xy /= np.maximum(np.bincount(win_a, minlength=len(model)), 1)[:, None]
+    path_a, win_a, per_lap, replay = _learn(model, odo, map_laps, keep=not loc_laps)
+    node_xy = _node_positions(len(model), path_a, win_a)
     qe_m = float(np.linalg.norm(path_a - node_xy[win_a], axis=1).mean())
-
     if loc_laps:
         replay = [(i, x, t) for i, lap in enumerate(loc_laps) for x, t in odo(lap)]
-    loc_true, loc_lap, with_xy, without_xy = [], [], [], []
-    nan2 = np.array([np.nan, np.nan])
-    for i, x, true in replay:
-        loc_true.append(true[:2])
-        loc_lap.append(i)
-        r = model.localise(x)
-        with_xy.append(node_xy[r.node] if r.node >= 0 else nan2)
-        r = model.localise(x, LASER_CHANNELS)
-        without_xy.append(node_xy[r.node] if r.node >= 0 else nan2)
-    loc_true_a = np.asarray(loc_true, float).reshape(-1, 2)
-    loc_lap_a = np.asarray(loc_lap, np.int64)
+    loc_true_a, loc_lap_a, with_xy, without_xy = _localise(model, node_xy, replay)
     thr = params.loc_threshold
-    ok_with = localisation_success(np.reshape(with_xy, (-1, 2)), loc_true_a, thr)
-    ok_without = localisation_success(np.reshape(without_xy, (-1, 2)), loc_true_a, thr)
-
-    def rate(ok: np.ndarray) -> float:
-        return float(ok.mean()) if len(ok) else float("nan")
-
-    laps_seen = sorted(set(loc_lap))
+    ok_with = localisation_success(with_xy, loc_true_a, thr)
+    ok_without = localisation_success(without_xy, loc_true_a, thr)
+    rate = _rate
+    laps_seen = sorted(set(loc_lap_a.tolist()))
     metrics = {
         "nodes": len(model),
         "edges": model.num_edges,
-        "frames": len(winners),
+        "frames": len(win_a),
         "qe": quantisation_error(path_a, node_xy[win_a]),
         "qe_m": qe_m,
-        "cr": compression_ratio(len(winners), len(model)),
+        "cr": compression_ratio(len(win_a), len(model)),
         "nodes_per_lap": per_lap,
-        "localisation_frames": len(loc_true),
+        "localisation_frames": len(loc_true_a),
         "localisation_rate_with_odometry": rate(ok_with),
         "localisation_rate_without_odometry": rate(ok_without),
         "localisation_per_lap_with_odometry": [rate(ok_with[loc_lap_a == i]) for i in laps_seen],
