@@ -6,6 +6,8 @@ Each function is checked against a brute-force loop written here or an invariant
 from __future__ import annotations
 
 import math
+import re
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -227,3 +229,37 @@ def test_odometry_steps_follow_dead_reckoning_and_close_a_circle():
     # the midpoint step goes along the mean heading
     x, y, _ = odometry_step((0.0, 0.0, 0.0), 1.0, 1.0, 1.0, midpoint=True)
     assert (x, y) == pytest.approx((math.cos(0.5), math.sin(0.5)))
+
+
+# ---------------------------------------------------------------------------- one home
+WRAP_IDIOMS = re.compile(
+    r"%\s*\(?2(\.0)?\s*\*\s*(np|math)\.pi|np\.angle\(np\.exp\(1j|math\.remainder\("
+    r"|atan2\(\s*(math|np)\.sin|np\.(mod|remainder)\([^)]*[+-]\s*(np|math)\.pi|def _?wrap"
+)
+#: the alpha rule's hot scalar loop inlines wrap_angle's arithmetic (commented there)
+ALLOWED = {"graph/geometry.py", "graph/backends/alpha.py"}
+
+
+def test_angles_are_wrapped_only_by_the_geometry_module():
+    root = Path(__file__).resolve().parents[3]
+    files = [*(root / "graph").rglob("*.py"), *(root / "torchratslam").rglob("*.py")]
+    offenders = {
+        str(f.relative_to(root)): m.group(0)
+        for f in files
+        if str(f.relative_to(root)) not in ALLOWED
+        for m in [WRAP_IDIOMS.search(f.read_text())]
+        if m
+    }
+    assert not offenders, f"wrap angles with torchratslam.graph.geometry.wrap_angle: {offenders}"
+    assert WRAP_IDIOMS.search("th = (a + np.pi) % (2 * np.pi) - np.pi")
+
+
+def test_the_old_homes_re_export_the_one_implementation():
+    from torchratslam.graph import geometry
+
+    from torchratslam import eval as ev
+    from torchratslam.maps import merge
+    from torchratslam.pose_cells import network
+
+    assert ev.align_se2 is geometry.align_se2 and ev.dead_reckoning is geometry.dead_reckoning
+    assert merge.pc_distance is geometry.pc_distance is network.pc_distance
