@@ -79,8 +79,8 @@ def wrap_angle(a: Any, *, include_pi: bool = False) -> Any:
         a: any shape; returns the same shape.
     """
     if isinstance(a, float):  # a scalar: Python's % rounds exactly as np.remainder does
-        out = math.pi - (math.pi - a) % _TAU if include_pi else (a + math.pi) % _TAU - math.pi
-        return float(out)
+        w = math.pi - (math.pi - a) % _TAU if include_pi else (a + math.pi) % _TAU - math.pi
+        return float(w)
     if not isinstance(a, _NUMPY_LIKE):  # a tensor: keep its type, device and dtype
         return math.pi - (math.pi - a) % _TAU if include_pi else (a + math.pi) % _TAU - math.pi
     x = np.asarray(a, dtype=np.float64)

@@ -67,6 +67,7 @@ def laser_frames(session: Any, start: int, stop: int) -> Iterator[Frame]:
     """Frames ``start..stop`` with scans, odometry and pose but no image (fast)."""
     for k in range(start, stop):
         vt, vr, dt = (float(v) for v in session.odometry[k])
+        x, y, th = (float(v) for v in session.poses[k])
         yield Frame(
             index=k,
             t=float(session.times[k]),
@@ -74,7 +75,7 @@ def laser_frames(session: Any, start: int, stop: int) -> Iterator[Frame]:
             vtrans=vt,
             vrot=vr,
             dt=dt,
-            pose=tuple(float(v) for v in session.poses[k]),
+            pose=(x, y, th),
             scans=session.scans(k),
             meta={"lap": int(session.laps[k])},
         )
@@ -112,7 +113,7 @@ def _write_outputs(result: Any, metrics: dict[str, Any], out: Path) -> None:
     state = result.model.get_state()
     arrays = {k.replace("/", "__"): np.asarray(v) for k, v in state.items() if k != "params"}
     tmp = out / ".state.tmp.npz"
-    np.savez(tmp, **arrays, node_xy=result.node_xy)
+    np.savez(tmp, **arrays, node_xy=result.node_xy)  # type: ignore[arg-type]
     os.replace(tmp, out / "state.npz")
 
 

@@ -287,7 +287,7 @@ def run_dataset(
     result = slam.run(data, max_frames=max_frames, progress=progress)
     if result.frames == 0:
         raise InputError(f"{data_spec}: no frames were read; check the dataset")
-    extra = {"data": str(data_spec), "config": str(config_spec)}
+    extra: dict[str, Any] = {"data": str(data_spec), "config": str(config_spec)}
     if odometry is not None:
         extra["odometry"] = "visual"
     if load:

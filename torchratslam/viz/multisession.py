@@ -32,7 +32,8 @@ def _draw(ax: Any, poses: np.ndarray, links: np.ndarray, colour: str, label: str
     e = np.asarray(links, np.int64).reshape(-1, 2)
     if e.size:
         ok = (e >= 0).all(1) & (e < len(p)).all(1)
-        ax.add_collection(LineCollection(p[e[ok]][:, :, :2], colors=colour, linewidths=0.7))
+        segments = p[e[ok]][:, :, :2]
+        ax.add_collection(LineCollection(segments, colors=colour, linewidths=0.7))  # type: ignore[arg-type]
     ax.scatter(p[:, 0], p[:, 1], s=5, color=colour, label=f"{label} ({len(p)})", zorder=3)
 
 
