@@ -2,6 +2,7 @@
 
 from torchratslam.eval.metrics import (
     IcpResult,
+    Se2Alignment,
     align_se2,
     apply_se2,
     ate_rmse,
@@ -13,6 +14,7 @@ from torchratslam.eval.metrics import (
 
 __all__ = [
     "IcpResult",
+    "Se2Alignment",
     "align_se2",
     "apply_se2",
     "ate_rmse",

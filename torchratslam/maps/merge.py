@@ -33,6 +33,7 @@ from typing import Any
 import numpy as np
 
 from torchratslam.graph.errors import GraphError
+from torchratslam.graph.geometry import pc_distance, wrap_angle
 from torchratslam.maps.state import (
     EM_ACCUM,
     INT_FIELDS,
@@ -45,23 +46,6 @@ from torchratslam.maps.state import (
 __all__ = ["MergeResult", "merge_maps", "pc_distance", "pick_experience", "shift_activity"]
 
 log = logging.getLogger(__name__)
-
-
-def _wrap(a: np.ndarray | float) -> np.ndarray | float:
-    """Angles to (-pi, pi]."""
-    return np.pi - np.mod(np.pi - np.asarray(a, dtype=np.float64), 2 * np.pi)
-
-
-def pc_distance(a: np.ndarray, b: np.ndarray, dims: tuple[int, int, int]) -> np.ndarray:
-    """Pose-cell distance: per axis the shorter way round the ring, then Euclidean.
-
-    Shape:
-        a: ``(..., 3)`` (x, y, th cells); b broadcastable to it; returns ``a.shape[:-1]``.
-    """
-    d = np.abs(np.asarray(a, np.float64) - np.asarray(b, np.float64))
-    n = np.asarray(dims, np.float64)
-    d = np.minimum(np.mod(d, n), n - np.mod(d, n))
-    return np.sqrt((d * d).sum(-1))
 
 
 def pick_experience(state: MapState, template_id: int, pc: np.ndarray | None = None) -> int:
@@ -153,7 +137,7 @@ def rigid_transform(poses: np.ndarray, dth: float, tx: float, ty: float) -> np.n
     p[..., 0] = c * x - s * y + tx
     p[..., 1] = s * x + c * y + ty
     if p.shape[-1] > 2:
-        p[..., 2] = _wrap(p[..., 2] + dth)
+        p[..., 2] = wrap_angle(p[..., 2] + dth, include_pi=True)
     return p
 
 
@@ -224,7 +208,11 @@ def merge_maps(
     t_pc = np.mod(partial.template_pc[keep_t] + assoc_shift, dims)
     # (iv) experiences, Eqs. 13-17
     if e_z >= 0:
-        dth = float(_wrap(loaded.exp_pose[e_u, 2] - partial.exp_pose[e_z, 2] + relative_rad))
+        dth = float(
+            wrap_angle(
+                loaded.exp_pose[e_u, 2] - partial.exp_pose[e_z, 2] + relative_rad, include_pi=True
+            )
+        )
         c, s = math.cos(dth), math.sin(dth)
         pz = partial.exp_pose[e_z, :2]
         tx = loaded.exp_pose[e_u, 0] - (c * pz[0] - s * pz[1])
@@ -265,7 +253,7 @@ def merge_maps(
     if EM_ACCUM in extra:  # [x, y, facing, time] accumulated in the partial map's frame
         acc = np.array(extra[EM_ACCUM], np.float64, copy=True)
         acc[:2] = rigid_transform(acc[:2], dth, 0.0, 0.0)
-        acc[2] = float(_wrap(acc[2] + dth))
+        acc[2] = float(wrap_angle(acc[2] + dth, include_pi=True))
         extra[EM_ACCUM] = acc
     if PC_BEST in extra:  # the decoded packet centre moves with the activity roll
         src = partial.template_pc[z]

@@ -733,8 +733,23 @@ def _np(v: Any) -> np.ndarray:
 
 def state_from_slam(slam: Any) -> MapState:
     """The complete state of a running ``RatSLAM`` (or ``MultiSessionRatSLAM``) as a
-    :class:`MapState` (from each module's ``get_state()``)."""
-    slam = getattr(slam, "slam", slam)
+    :class:`MapState` (from each module's ``get_state()``).
+
+    Raises:
+        MapFormatError: a module has no ``get_state`` / ``set_state``
+            (:class:`torchratslam.protocols.Stateful`).
+    """
+    from torchratslam.pipeline import RatSLAM
+    from torchratslam.protocols import Stateful
+
+    slam = slam if isinstance(slam, RatSLAM) else slam.slam  # a multisession wrapper
+    stages = {"local view": slam.local_view, "pose cells": slam.pose_cells}
+    for label, module in {**stages, "experience map": slam.experience_map}.items():
+        if not isinstance(module, Stateful):
+            raise MapFormatError(
+                f"the {label} ({type(module).__name__}) has no get_state()/set_state(), "
+                "so its map cannot be saved"
+            )
     lv = slam.local_view.get_state()
     pc = slam.pose_cells.get_state()
     em = slam.experience_map.get_state()
@@ -786,10 +801,9 @@ def state_from_slam(slam: Any) -> MapState:
     _split_extras("lv", lv, _LV_KNOWN, state)
     _split_extras("pc", pc, _PC_KNOWN, state)
     _split_extras("em", em, _EM_KNOWN, state)
-    odo = getattr(slam, "odometry", None)
-    if odo is not None and hasattr(odo, "get_state"):
-        _split_extras("vo", odo.get_state(), set(), state)
-    state.scalars["slam.last_t"] = float(getattr(slam, "_last_t", 0.0))
+    if isinstance(slam.odometry, Stateful):
+        _split_extras("vo", slam.odometry.get_state(), set(), state)
+    state.scalars["slam.last_t"] = float(slam._last_t)
     return state.validate(source="running map")
 
 
@@ -806,7 +820,10 @@ def apply_state(state: MapState, slam: Any, *, exp_ids: np.ndarray | None = None
     Raises:
         MapFormatError: the map is incompatible with the slam's config.
     """
-    slam = getattr(slam, "slam", slam)
+    from torchratslam.pipeline import RatSLAM
+    from torchratslam.protocols import Stateful
+
+    slam = slam if isinstance(slam, RatSLAM) else slam.slam  # a multisession wrapper
     state = conform(state, slam.config)
     lv = _collect("lv", state)
     lv.update(
@@ -819,9 +836,10 @@ def apply_state(state: MapState, slam: Any, *, exp_ids: np.ndarray | None = None
             "template_shape": np.asarray(state.templates.shape[1:], np.int64),
         }
     )
-    lv.setdefault("kind", getattr(slam.local_view, "kind", "ratslam"))
-    lv_module = __import__(type(slam.local_view).__module__, fromlist=["STATE_VERSION"])
-    lv.setdefault("version", getattr(lv_module, "STATE_VERSION", 1))
+    if not {"kind", "version"} <= lv.keys():  # not saved (an imported map): the module's own
+        own = slam.local_view.get_state()
+        lv.setdefault("kind", own.get("kind", "ratslam"))
+        lv.setdefault("version", own.get("version", 1))
     lv.setdefault("frame_counter", int(state.frame_index))
     pc = _collect("pc", state)
     pc.update(
@@ -847,12 +865,10 @@ def apply_state(state: MapState, slam: Any, *, exp_ids: np.ndarray | None = None
     slam.local_view.set_state(lv)
     slam.pose_cells.set_state(pc)
     slam.experience_map.set_state(em)
-    odo = getattr(slam, "odometry", None)
     vo = _collect("vo", state)
-    if odo is not None and hasattr(odo, "set_state") and vo:
-        odo.set_state(vo)
+    if isinstance(slam.odometry, Stateful) and vo:
+        slam.odometry.set_state(vo)
     slam.frame_index = int(state.frame_index)
-    if hasattr(slam, "_last_t"):
-        slam._last_t = float(state.scalars.get("slam.last_t", 0.0))
-    if exp_ids is not None and hasattr(slam, "remap_experiences"):
+    slam._last_t = float(state.scalars.get("slam.last_t", 0.0))
+    if exp_ids is not None:
         slam.remap_experiences(np.asarray(exp_ids, np.int64))

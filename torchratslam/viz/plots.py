@@ -103,7 +103,8 @@ def plot_map(
         tr = np.asarray(trajectory_xy, dtype=np.float64)[:, :2]
         ok = np.all(np.isfinite(gt), 1) & np.all(np.isfinite(tr), 1)
         if ok.sum() >= 2:
-            rot, t = align_se2(gt[ok], tr[ok])
+            fit = align_se2(gt[ok], tr[ok])
+            rot, t = fit.rotation, fit.translation
             g = gt @ rot.T + t
             ax.plot(g[:, 0], g[:, 1], color="0.6", lw=1.0, label="ground truth (aligned)", zorder=1)
     segs = _world_segments(world) if world is not None else None
