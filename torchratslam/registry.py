@@ -110,7 +110,7 @@ class Registry(Generic[P]):
                 f"{', '.join(missing) or 'part of the interface'} "
                 f"(see torchratslam.protocols.{self.protocol.__name__})"
             )
-        return obj  # type: ignore[no-any-return]
+        return obj
 
     def names(self) -> list[str]:
         """The registered names, sorted."""
