@@ -88,9 +88,10 @@ def match_last_template(loaded: Any, partial: Any, config: Any) -> tuple[int, fl
 
 
 def main(args: argparse.Namespace) -> int:
+    from torchratslam.maps.io import load_state
     from torchratslam.maps.merge import merge_maps
     from torchratslam.maps.reference_format import write_reference
-    from torchratslam.maps.state import apply_experience_map, load_state, save_map
+    from torchratslam.maps.state import apply_experience_map, save_map
 
     config = load_config(args.config)
     loaded = load_state(args.loaded, config)

@@ -24,7 +24,7 @@ mean/median ms per frame, ate_rmse_m when there is ground truth), experiences.cs
 (id,x,y,th,created_frame; final poses), trajectory.csv (frame,t,experience_id,x,y,th:
 the experience current after each frame, with its final pose), map.png,
 pose_cells.png and the saved map state in OUT/state (load it with --load or
-torchratslam.maps.state.load_state)."""
+torchratslam.maps.io.load_state)."""
 
 EPILOG = """examples:
   torchratslam run --config configs/virtual_tour.yaml --data sim:virtual_tour --out out/vt
@@ -335,7 +335,7 @@ def main(args: argparse.Namespace) -> int:
     device = torch.device(args.device) if args.device else None
     kwargs: dict[str, Any] = {"odometry": odometry, "device": device, "pipelined": args.pipelined}
     if args.load:
-        from torchratslam.maps.state import load_state
+        from torchratslam.maps.io import load_state
         from torchratslam.multisession.session import MultiSessionRatSLAM
 
         stored = [load_state(p) for p in args.load]

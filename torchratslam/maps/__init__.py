@@ -1,5 +1,6 @@
 """Saved maps: the in-memory map state, the native and the authors' reference formats, merges."""
 
+from torchratslam.maps.io import load_state, map_format
 from torchratslam.maps.merge import (
     MergeResult,
     merge_maps,
@@ -19,7 +20,6 @@ from torchratslam.maps.state import (
     MapState,
     check_compatible,
     load_map,
-    load_state,
     save_map,
     save_state,
 )
@@ -34,6 +34,7 @@ __all__ = [
     "is_reference_map",
     "load_map",
     "load_state",
+    "map_format",
     "merge_maps",
     "pc_distance",
     "pick_experience",
