@@ -44,6 +44,21 @@ def register(subparsers: Any) -> argparse.ArgumentParser:
         help="skip the pose-cell association shift (the paper's Fig. 12 ablation)",
     )
     p.add_argument(
+        "--exp-pc-shift",
+        choices=("experiences", "templates"),
+        default="experiences",
+        help="shift of the partial experiences' pose-cell coordinates: by the matched "
+        "experiences' difference (default, the authors' code) or by the templates' (the "
+        "paper's single shift), e.g. --exp-pc-shift templates",
+    )
+    p.add_argument(
+        "--match-exp",
+        choices=("first", "nearest"),
+        default="first",
+        help="loaded experience merged at: the matched template's first (default, the "
+        "authors' code) or the one nearest in pose cells, e.g. --match-exp nearest",
+    )
+    p.add_argument(
         "--relax",
         action="store_true",
         help="relax the merged map once (exp_loops passes, exp_backend)",
@@ -97,7 +112,15 @@ def main(args: argparse.Namespace) -> int:
     loaded = load_state(args.loaded, config)
     partial = load_state(args.partial, config)
     tid, rel, err = match_last_template(loaded, partial, config)
-    res = merge_maps(loaded, partial, tid, relative_rad=rel, shift_pose_cells=not args.no_pc_shift)
+    res = merge_maps(
+        loaded,
+        partial,
+        tid,
+        relative_rad=rel,
+        shift_pose_cells=not args.no_pc_shift,
+        exp_pc_shift=args.exp_pc_shift,
+        match_exp=args.match_exp,
+    )
     merged = res.state
     if args.relax:
         merged = apply_experience_map(merged, config)
