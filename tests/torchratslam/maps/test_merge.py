@@ -503,3 +503,26 @@ def test_unknown_merge_options_are_errors():
         merge_maps(loaded, partial, 2, exp_pc_shift="paper")
     with pytest.raises(GraphError, match="match_exp must be one of"):
         merge_maps(loaded, partial, 2, match_exp="last")
+
+
+def test_cli_merge_options_select_the_readings(tmp_path, capsys):
+    from torchratslam.cli import main
+    from torchratslam.config import load_config
+    from torchratslam.maps.io import load_state
+
+    loaded, partial, cfg = _cli_maps(tmp_path)
+    loaded.exp_template[5] = 2  # template 2 has experiences 2 and 5; 5 is nearer
+    loaded.exp_pc[5] = loaded.template_pc[2] + [0.2, 0, 0]
+    loaded.exp_pc[2] = np.mod(loaded.template_pc[2] + [3, 0, 0], DIMS)
+    from torchratslam.maps.state import save_map
+
+    save_map(loaded, tmp_path / "loaded2")
+    args = ["merge", "--config", str(cfg), "--loaded", str(tmp_path / "loaded2")]
+    args += ["--partial", str(tmp_path / "partial")]
+    for opts, e_u in (([], 2), (["--match-exp", "nearest", "--exp-pc-shift", "templates"], 5)):
+        out = tmp_path / f"m{e_u}"
+        assert main([*args, "--out", str(out), *opts]) == 0
+        assert f'"loaded_exp": {e_u}' in capsys.readouterr().out
+        kw = {"match_exp": "nearest", "exp_pc_shift": "templates"} if opts else {}
+        want = merge_maps(loaded, partial, 2, **kw).state
+        assert np.array_equal(load_state(out, load_config(cfg)).exp_pc, want.exp_pc)
