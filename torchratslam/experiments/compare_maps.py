@@ -90,16 +90,8 @@ def draw_icp_overlay(
     Shape:
         fixed: ``(M, 2|3)``; moved_aligned: ``(N, 2|3)``.
     """
-    ax.plot(fixed[:, 0], fixed[:, 1], ".-", ms=3, lw=0.6, color="tab:purple", label=fixed_label)
-    ax.plot(
-        moved_aligned[:, 0],
-        moved_aligned[:, 1],
-        ".-",
-        ms=3,
-        lw=0.6,
-        color="tab:orange",
-        label=moved_label,
-    )
+    ax.scatter(fixed[:, 0], fixed[:, 1], s=9, color="tab:purple", label=fixed_label)
+    ax.scatter(moved_aligned[:, 0], moved_aligned[:, 1], s=4, color="tab:orange", label=moved_label)
     ax.set_xlabel("x (m)")
     ax.set_ylabel("y (m)")
     ax.set_aspect("equal", adjustable="datalim")
@@ -162,8 +154,8 @@ def compare_maps(
             ax,
             sa.exp_pose,
             lib.aligned,
-            fixed_label=f"A: {pa.name} (fixed)",
-            moved_label=f"B: {pb.name} (ICP-aligned)",
+            fixed_label=f"A: {_label(pa)} (fixed)",
+            moved_label=f"B: {_label(pb)} (ICP-aligned)",
             mse_m2=lib.residual_m2,
         )
         fp = Path(figure)
@@ -173,6 +165,11 @@ def compare_maps(
         plt.close(fig)
         out["figure"] = str(fp)
     return out
+
+
+def _label(p: Path) -> str:
+    """A short name for a map directory (``run1/state`` rather than ``state``)."""
+    return f"{p.parent.name}/{p.name}" if p.name == "state" else p.name
 
 
 def _try_gt(spec: str) -> np.ndarray | None:
