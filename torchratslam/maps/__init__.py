@@ -1,8 +1,9 @@
 """Saved maps: the in-memory map state, the native and the authors' reference formats, merges."""
 
-from torchratslam.maps.io import load_state, map_format
+from torchratslam.maps.io import convert_map, load_state, map_format, reference_losses
 from torchratslam.maps.merge import (
     MergeResult,
+    first_experience,
     merge_maps,
     pc_distance,
     pick_experience,
@@ -31,6 +32,8 @@ __all__ = [
     "MapState",
     "MergeResult",
     "check_compatible",
+    "convert_map",
+    "first_experience",
     "is_reference_map",
     "load_map",
     "load_state",
@@ -39,6 +42,7 @@ __all__ = [
     "pc_distance",
     "pick_experience",
     "read_reference",
+    "reference_losses",
     "save_map",
     "save_state",
     "shift_activity",

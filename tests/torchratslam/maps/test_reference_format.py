@@ -459,3 +459,37 @@ def test_values_without_a_field_of_their_own_are_kept(tmp_path):
     assert texts["posecellexperiences.txt"].endswith("6.9\n0\n-\n2\n0\n")
     assert texts["posecellvisual_templates.txt"].endswith("-\n1\n\n")
     assert math.isclose(s.exp_pose[2, 0], -0.9)
+
+
+def test_random_corruptions_give_only_located_map_format_errors(tmp_path):
+    """Lines replaced, inserted or deleted, bytes flipped, files cut: the reader either
+    reads a valid map or raises one MapFormatError line, never anything else."""
+    import random
+
+    rng = random.Random(13)
+    tokens = ["", "-", "[[1]]", "1e400", "nan", "-inf", "-1", "1e300", "0.5", "a b", "9" * 30]
+    tokens += ["[0,'a']", "1 2 3", "\x00", "2", "1.0"]
+    outcomes = set()
+    for it in range(150):
+        files = dict(HAND)
+        for _ in range(rng.randint(1, 3)):
+            name = rng.choice(sorted(files))
+            lines = files[name].split("\n")
+            i, op = rng.randrange(len(lines)), rng.random()
+            if op < 0.5:
+                lines[i] = rng.choice(tokens)
+            elif op < 0.7:
+                del lines[i]
+            elif op < 0.9:
+                lines.insert(i, rng.choice(tokens))
+            else:
+                lines = "\n".join(lines)[: rng.randrange(len(files[name]) + 1)].split("\n")
+            files[name] = "\n".join(lines)
+        d = write_hand(tmp_path / f"m{it}", files)
+        try:
+            read_reference(d, CFG)
+            outcomes.add("read")
+        except MapFormatError as exc:
+            assert "\n" not in str(exc) and str(d) in str(exc), str(exc)
+            outcomes.add("error")
+    assert outcomes == {"read", "error"}
