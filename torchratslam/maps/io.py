@@ -139,12 +139,15 @@ def _differences(a: _state.MapState, b: _state.MapState, *, reference: bool) -> 
         if x.size != y.size or not np.array_equal(x.reshape(-1), y.reshape(-1)):
             out.append(name)
     for name in _IDS:
-        x, y = getattr(a, name), getattr(b, name)
-        if x != y:
-            out.append(f"{name} ({x} -> {y})")
+        i, j = getattr(a, name), getattr(b, name)
+        if i != j:
+            out.append(f"{name} ({i} -> {j})")
     for key in sorted(_REF_EXTRAS):
-        x, y = a.extra.get(key), b.extra.get(key)
-        if (x is None) != (y is None) or (x is not None and not np.array_equal(x, y)):
+        ea, eb = a.extra.get(key), b.extra.get(key)
+        if ea is None or eb is None:
+            if (ea is None) != (eb is None):
+                out.append(f"extra {key}")
+        elif not np.array_equal(ea, eb):
             out.append(f"extra {key}")
     return out
 

@@ -315,6 +315,7 @@ def merge_maps(
             n_a = getattr(loaded, PER_ENTITY[prefix]).shape[0]
             n_b = getattr(partial, PER_ENTITY[prefix]).shape[0]
             ref = a if a is not None else b
+            assert ref is not None  # the key comes from one of the two maps
             fill = _FILL.get(key, 0)
             if a is None:
                 a = np.full((n_a, *ref.shape[1:]), fill, ref.dtype)
@@ -365,7 +366,11 @@ def merge_maps(
         activity=shift_activity(partial.activity, delta, partial.template_pc[z]),
         extra=extra,
         scalars={k: v for k, v in partial.scalars.items() if not k.startswith(_DROP_SCALARS)},
-        **ids,
+        current_vt=ids["current_vt"],
+        prev_vt=ids["prev_vt"],
+        current_exp=ids["current_exp"],
+        prev_exp=ids["prev_exp"],
+        frame_index=ids["frame_index"],
     )
     info = {
         "loaded_template": u,
