@@ -49,6 +49,20 @@ def register(subparsers: Any) -> argparse.ArgumentParser:
         help="also map without the pose-cell shift (the paper's Fig. 12)",
     )
     p.add_argument(
+        "--exp-pc-shift",
+        choices=("experiences", "templates"),
+        default="experiences",
+        help="merge: shift of the experiences' pose-cell coordinates (default experiences: "
+        "the authors' code; templates: the paper's single shift)",
+    )
+    p.add_argument(
+        "--match-exp",
+        choices=("first", "nearest"),
+        default="first",
+        help="merge: loaded experience merged at (default first: the authors' code; "
+        "nearest: nearest in pose cells)",
+    )
+    p.add_argument(
         "--backends",
         default="",
         help="comma-separated relaxation backends to compare, e.g. alpha,gtsam",
@@ -326,6 +340,7 @@ def run(
     figures: bool = True,
     progress: bool = False,
     overrides: dict[str, Any] | None = None,
+    merge_options: dict[str, Any] | None = None,
 ) -> dict[str, Any]:
     """Run the experiment and write OUT (what the CLI and the demo call).
 
@@ -333,6 +348,7 @@ def run(
         config: a ``RatSLAMConfig``, a config path/name, or None for the tour's shipped
             config (:data:`TOUR_CONFIG`), unmodified.
         overrides: flat config keys replaced last.
+        merge_options: ``merge_maps`` options (default: the authors' code).
 
     Returns:
         ``run_tour``'s result (``report`` and ``data``).
@@ -358,6 +374,7 @@ def run(
         save_dir=out,
         progress=progress,
         max_frames=max_frames,
+        merge_options=merge_options,
     )
     report = result["report"]
     report["seed"] = seed
@@ -391,6 +408,11 @@ def main(args: argparse.Namespace) -> int:
         figures=not args.no_figures,
         progress=not args.quiet,
         overrides=overrides,
+        merge_options={
+            k: v
+            for k, v in (("exp_pc_shift", args.exp_pc_shift), ("match_exp", args.match_exp))
+            if v != {"exp_pc_shift": "experiences", "match_exp": "first"}[k]
+        },
     )
     print(report_markdown(result["report"]))
     print(f"wrote {Path(args.out) / 'report.json'}")

@@ -398,6 +398,7 @@ def run_tour(
     save_dir: Any = None,
     progress: bool = False,
     max_frames: int | None = None,
+    merge_options: dict[str, Any] | None = None,
     **ratslam_kwargs: Any,
 ) -> dict[str, Any]:
     """Multisession versus single-session mapping of a simulated tour.
@@ -420,6 +421,8 @@ def run_tour(
         progress: progress bars.
         max_frames: frames per session at most (quick checks; the continuous and
             concatenated runs get this many per session, the bridges included).
+        merge_options: ``merge_maps`` options for every multisession run
+            (``exp_pc_shift``, ``match_exp``; default: the authors' code).
 
     Returns:
         ``report`` (JSON-able: the keys of ``OUT/report.json``) and ``data`` (the maps,
@@ -460,6 +463,9 @@ def run_tour(
     # the last session alone, continuous (for the virtual tour it contains session 1's path)
     last_state, _ = single_run(_shifted(tour.sessions[-1].frames(), offsets[-1]), max_frames)
 
+    ms_kwargs = dict(ratslam_kwargs)
+    if merge_options:
+        ms_kwargs["merge_options"] = dict(merge_options)
     multi = run_sessions(
         config,
         tour.sessions,
@@ -467,7 +473,7 @@ def run_tour(
         save_dir=sub("multi"),
         progress=progress,
         max_frames=max_frames,
-        **ratslam_kwargs,
+        **ms_kwargs,
     )
     final = multi["maps"][-1]
     m_xy = final.exp_pose[:, :2]
@@ -546,6 +552,8 @@ def run_tour(
             for m in multi["merges"]
         ],
     }
+    if merge_options:
+        report["merge_options"] = dict(merge_options)
     n_m = report["multi"]["experiences"]
     report["experiences_difference_relative"] = rel(n_m, report["single"]["experiences"])
     report["experiences_difference_relative_concatenated"] = rel(
@@ -574,7 +582,7 @@ def run_tour(
             shift_pose_cells=False,
             progress=progress,
             max_frames=max_frames,
-            **ratslam_kwargs,
+            **ms_kwargs,
         )
         report["ablation_no_pc_shift"] = block(abl)
         data["ablation"] = abl
@@ -594,7 +602,7 @@ def run_tour(
                     offsets=offsets,
                     progress=progress,
                     max_frames=max_frames,
-                    **ratslam_kwargs,
+                    **ms_kwargs,
                 )
             b = block(run)
             table[name] = {
