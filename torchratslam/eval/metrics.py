@@ -7,10 +7,11 @@
   after that alignment.
 * :func:`dead_reckoning` -- integrate (vtrans, vrot, dt) the way the experience map
   does (heading first, then the step along it), for the "odometry only" baseline.
-* :func:`icp` / :func:`icp_rmse` -- point-to-point ICP between two maps like libicp
-  (which the multisession and xRatSLAM papers used to compare experience maps):
-  nearest neighbours, closed-form rigid update, repeat until the motion is tiny;
-  the RMSE is over the final nearest-neighbour distances.
+* :func:`icp` / :func:`icp_rmse` -- the project's ICP figure: point-to-point ICP
+  between two maps (nearest neighbours, closed-form rigid update, repeat until the
+  motion is tiny); the RMSE (m) is over the final nearest-neighbour distances. The
+  papers' figure is not this RMSE but LibICP's mean squared residual (m^2):
+  :func:`torchratslam.eval.icp.libicp_point_to_point`.
 
 All functions are numpy-only and deterministic.
 """
