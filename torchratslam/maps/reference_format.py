@@ -304,10 +304,7 @@ def read_reference(directory: str | Path, config: Any = None) -> MapState:
         size = int(size_v)
         n_lv, lv_end = lv.records(1, 3, tail=True, what="templates")
         if n_lv != n:
-            raise MapFormatError(
-                f"{d / LVC} holds {n_lv} templates but {d / PVT} holds {n}; the save is "
-                "inconsistent"
-            )
+            raise lv.error(lv_end, f"{n_lv} templates end here but {PVT} holds {n}")
         ids = lv.ids(1, 3, n, 0, "template id", 0, max(n, 1))
         if (ids != np.arange(n)).any():
             k = int(np.argmax(ids != np.arange(n)))
@@ -324,7 +321,7 @@ def read_reference(directory: str | Path, config: Any = None) -> MapState:
             ty, tx = 1, size
         if ty * tx != size:
             raise MapFormatError(
-                f"{d / LVC}: templates have {size} values but the config's "
+                f"{d / LVC}, line 1: templates have {size} values but the config's "
                 f"template_x_size x template_y_size = {tx} x {ty} = {tx * ty}; use the "
                 "config the map was made with"
             )
@@ -347,9 +344,7 @@ def read_reference(directory: str | Path, config: Any = None) -> MapState:
     ex = _File(d / EXP)
     m_ex, ex_end = ex.records(0, 10, tail=True, what="experiences")
     if m_ex != m:
-        raise MapFormatError(
-            f"{d / EXP} holds {m_ex} experiences but {d / PCE} holds {m}; the save is inconsistent"
-        )
+        raise ex.error(ex_end, f"{m_ex} experiences end here but {PCE} holds {m}")
     eid = ex.ids(0, 10, m, 0, "experience id", 0, max(m, 1))
     if (eid != np.arange(m)).any():
         k = int(np.argmax(eid != np.arange(m)))

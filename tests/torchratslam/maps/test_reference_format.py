@@ -401,6 +401,20 @@ MALFORMED = [
     ("links.txt", "0.0\n1\n7.0\n", "0.0\n1\n", 12, "unexpected end of file inside link 1"),
     ("links.txt", "1\n0\n3.5", "0\n0\n3.5", 4, "joins experience 0 to itself"),
     ("goal_list.txt", "", savetxt([0, 7]), 1, "not an experience id"),
+    (
+        "localviewcells.txt",
+        "1.0\n0.25\n" + savetxt([0, 0.5, 0.25, 0.25, 0.5, 0]) + "\n",
+        "",
+        5,
+        "1 templates end here but posecellvisual_templates.txt holds 2",
+    ),
+    (
+        "experiences.txt",
+        "2.0\n-0.9\n0.7\n2.5\n1\n\n\n0\n-1\n-1\n",
+        "",
+        21,
+        "2 experiences end here but posecellexperiences.txt holds 3",
+    ),
 ]
 
 
@@ -417,7 +431,7 @@ def test_malformed_files_give_one_line_located_errors(tmp_path, name, old, new, 
 
 def test_missing_files_and_wrong_sizes(tmp_path):
     write_hand(tmp_path / "ref")
-    with pytest.raises(MapFormatError, match=r"6 values but .* 4 x 2 = 8"):
+    with pytest.raises(MapFormatError, match=r"line 1: templates have 6 values but .* 4 x 2 = 8"):
         read_reference(tmp_path / "ref", {**CFG, "template_x_size": 4})
     (tmp_path / "ref" / "links.txt").unlink()
     with pytest.raises(MapFormatError, match=r"links\.txt is missing"):
