@@ -42,6 +42,20 @@ def register(subparsers: Any) -> argparse.ArgumentParser:
         help="also map without the pose-cell shift (the paper's Fig. 12)",
     )
     p.add_argument(
+        "--exp-pc-shift",
+        choices=("experiences", "templates"),
+        default="experiences",
+        help="merge: shift of the experiences' pose-cell coordinates (default experiences: "
+        "the authors' code; templates: the paper's single shift), e.g. --exp-pc-shift templates",
+    )
+    p.add_argument(
+        "--match-exp",
+        choices=("first", "nearest"),
+        default="first",
+        help="merge: loaded experience merged at (default first: the authors' code; "
+        "nearest: nearest in pose cells), e.g. --match-exp nearest",
+    )
+    p.add_argument(
         "--backends",
         default="",
         help="comma-separated relaxation backends to compare, e.g. alpha,gtsam",
@@ -88,6 +102,11 @@ def main(args: argparse.Namespace) -> int:
         figures=not args.no_figures,
         progress=not args.quiet,
         overrides=overrides,
+        merge_options={
+            k: v
+            for k, v in (("exp_pc_shift", args.exp_pc_shift), ("match_exp", args.match_exp))
+            if v != {"exp_pc_shift": "experiences", "match_exp": "first"}[k]
+        },
     )
     print(report_markdown(result["report"]))
     print(f"wrote {Path(args.out) / 'report.json'}")

@@ -5,10 +5,11 @@
   odometry integration; they live in :mod:`torchratslam.graph.geometry` and are
   re-exported here.
 * :func:`interpolate_groundtruth` -- ground-truth poses at given times.
-* :func:`icp` / :func:`icp_rmse` -- point-to-point ICP between two maps like libicp
-  (which the multisession and xRatSLAM papers used to compare experience maps):
-  nearest neighbours, closed-form rigid update, repeat until the motion is tiny;
-  the RMSE is over the final nearest-neighbour distances.
+* :func:`icp` / :func:`icp_rmse` -- the project's ICP figure (not the papers'):
+  point-to-point ICP between two maps (nearest neighbours, closed-form rigid update,
+  repeat until the motion is tiny); the RMSE (m) over the final nearest-neighbour
+  distances. The papers' figure is LibICP's mean
+  squared residual (m^2): :func:`torchratslam.eval.icp.libicp_point_to_point`.
 
 All functions are numpy-only and deterministic.
 """

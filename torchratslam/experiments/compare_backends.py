@@ -48,7 +48,7 @@ def load_posegraph(path: str | Path) -> Any:
         from torchratslam.graph.io import read_posegraph
 
         return read_posegraph(p)
-    from torchratslam.maps.state import load_state
+    from torchratslam.maps.io import load_state
 
     return posegraph_from_state(load_state(p))
 

@@ -278,7 +278,7 @@ def run_dataset(
         "pipelined": pipelined,
     }
     if load:
-        from torchratslam.maps.state import load_state
+        from torchratslam.maps.io import load_state
         from torchratslam.multisession.session import MultiSessionRatSLAM
 
         slam: Any = MultiSessionRatSLAM(config, [load_state(p) for p in load], **kwargs)

@@ -60,6 +60,9 @@ FORMAT_NAME = "torchratslam-map"
 FORMAT_VERSION = 1
 STATE_NPZ = "state.npz"
 STATE_JSON = "state.json"
+MISSING_KEY = "missing_files"
+"""Scalar key: the files a map was read without (a reference-format save lacking
+``localviewcells.txt`` has zero templates in their place; see :func:`require_templates`)."""
 
 # name -> (kind, ndim) ; kind "f" float, "i" integer. Shapes are cross-checked below.
 ARRAY_FIELDS: dict[str, tuple[str, int]] = {
@@ -510,14 +513,14 @@ def _resolve_native(path: Path) -> Path | None:
 
 
 def load_state(path: str | Path, config: Any = None) -> MapState:
-    """Load a map: a saved state directory, a run's OUT directory (``OUT/state/``), or a
-    directory in the reference implementation's text format.
+    """Load a native map: a saved state directory or a run's OUT directory
+    (``OUT/state/``). :func:`torchratslam.maps.io.load_state` also reads the reference
+    implementation's text format.
 
     Args:
         path: the directory.
-        config: a ``RatSLAMConfig`` (or flat dict). Needed to shape the templates of a
-            reference-format map (that format stores only their total size); when given,
-            the map's compatibility with it is checked too.
+        config: a ``RatSLAMConfig`` (or flat dict); when given, the map's
+            compatibility with it is checked.
 
     Raises:
         InputError: nothing loadable at ``path``.
@@ -530,18 +533,13 @@ def load_state(path: str | Path, config: Any = None) -> MapState:
             "directory, or a reference-format map directory"
         )
     native = _resolve_native(p) if p.is_dir() else None
-    if native is not None:
-        state = load_map(native)
-    else:
-        from torchratslam.maps.reference_format import is_reference_map, read_reference
-
-        if p.is_dir() and is_reference_map(p):
-            state = read_reference(p, config)
-        else:
-            raise InputError(
-                f"{p} holds no saved map: expected {STATE_JSON} + {STATE_NPZ}, a state/ "
-                "subdirectory (a run's OUT dir), or the reference format's localviewcells.txt"
-            )
+    if native is None:
+        raise InputError(
+            f"{p} holds no saved map: expected {STATE_JSON} + {STATE_NPZ} or a state/ "
+            "subdirectory (a run's OUT dir); reference-format maps load with "
+            "torchratslam.maps.io.load_state"
+        )
+    state = load_map(native)
     if config is not None:
         check_compatible(state, config, what=f"map {str(p)!r}")
     state.name = str(p)
@@ -678,6 +676,19 @@ def apply_experience_map(state: MapState, config: Any, *, passes: int | None = N
     return out
 
 
+def require_templates(state: MapState, *, what: str = "map") -> None:
+    """Raise :class:`MapFormatError` when ``state`` was read without its templates (a
+    reference-format save lacking ``localviewcells.txt``): it can be plotted and compared,
+    but not merged or continued."""
+    missing = state.scalars.get(MISSING_KEY)
+    if missing:
+        raise MapFormatError(
+            f"{what} ({state.name or 'in memory'}) has no templates: {missing} is missing "
+            "from its directory; merging or continuing a map needs its templates (plots, "
+            "ICP and ATE work without them)"
+        )
+
+
 def conform(state: MapState, config: Any, *, what: str = "stored map") -> MapState:
     """``state`` made usable with ``config``: a reference-format map read without a
     config (templates ``(N, 1, S)``, no pose-cell sizes) gets its templates reshaped to
@@ -687,6 +698,7 @@ def conform(state: MapState, config: Any, *, what: str = "stored map") -> MapSta
     Raises:
         MapFormatError: the map cannot be used with ``config``.
     """
+    require_templates(state, what=what)
     flat = config.to_flat() if hasattr(config, "to_flat") else dict(config)
     ty, tx = int(flat.get("template_y_size", 1)), int(flat.get("template_x_size", 1))
     if (

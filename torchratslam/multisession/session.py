@@ -59,6 +59,8 @@ class MultiSessionRatSLAM:
         session: the session's name, recorded in :attr:`merges`.
         keep_snapshots: keep the experience poses before and after each merge in
             :attr:`snapshots` (for figures).
+        merge_options: extra arguments of :func:`~torchratslam.maps.merge.merge_maps`
+            (``exp_pc_shift``, ``match_exp``; default: the authors' code).
         **ratslam_kwargs: passed to :class:`~torchratslam.pipeline.RatSLAM`
             (``local_view``, ``pose_cells``, ``experience_map``, ``odometry``, ``dtype``,
             ``device``).
@@ -87,8 +89,10 @@ class MultiSessionRatSLAM:
         names: list[str] | None = None,
         session: str = "session",
         keep_snapshots: bool = True,
+        merge_options: dict[str, Any] | None = None,
         **ratslam_kwargs: Any,
     ) -> None:
+        self.merge_options = dict(merge_options or {})
         self.slam = RatSLAM(config, **ratslam_kwargs)
         self.stored = [
             conform(s, config, what=f"stored map {i} ({s.name or 'in memory'})")
@@ -219,6 +223,7 @@ class MultiSessionRatSLAM:
             loaded_template,
             relative_rad=rel,
             shift_pose_cells=self.shift_pose_cells,
+            **self.merge_options,
         )
         apply_state(res.state, self.slam, exp_ids=res.info["exp_ids"])
         self.slam.experience_map.iterate()

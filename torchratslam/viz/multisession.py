@@ -101,11 +101,17 @@ def _final(ax: Any, data: dict[str, Any], report: dict[str, Any]) -> None:
 
 
 def _icp_overlay(ax: Any, data: dict[str, Any], report: dict[str, Any]) -> None:
-    s = data["single"].exp_pose
-    ax.scatter(s[:, 0], s[:, 1], s=5, color="tab:purple", label="single session")
-    a = data["icp"].aligned
-    ax.scatter(a[:, 0], a[:, 1], s=5, color="tab:orange", label="multisession (ICP-aligned)")
-    ax.set_title(f"ICP: RMSE {report['icp_rmse']:.4g} m")
+    """Fig. 10: the multisession map moved onto the single-session one by LibICP."""
+    from torchratslam.viz.plots import draw_icp_overlay
+
+    draw_icp_overlay(
+        ax,
+        data["single"].exp_pose,
+        data["libicp"].aligned,
+        fixed_label="single session",
+        moved_label="multisession (ICP-aligned)",
+        mse_m2=data["libicp"].residual_m2,
+    )
 
 
 def _ablation(ax: Any, data: dict[str, Any], report: dict[str, Any]) -> None:
@@ -126,7 +132,7 @@ def _panels(data: dict[str, Any]) -> list[tuple[str, Panel]]:
         ("fig9c_before_merge.png", _before_merge, merged),
         ("fig9d_after_merge.png", _after_merge, merged),
         ("fig9e_final.png", _final, True),
-        ("fig10_icp.png", _icp_overlay, data.get("icp") is not None),
+        ("fig10_icp.png", _icp_overlay, data.get("libicp") is not None),
         ("fig12_ablation.png", _ablation, "ablation" in data),
     ]
     return [(name, draw) for name, draw, wanted in panels if wanted]
