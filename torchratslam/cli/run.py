@@ -143,6 +143,13 @@ def register(subparsers: Any) -> argparse.ArgumentParser:
         "threads mostly add overhead), e.g. --threads 4",
     )
     p.add_argument("--no-progress", action="store_true", help="no progress bar, e.g. --no-progress")
+    p.add_argument(
+        "--scale-report",
+        action="store_true",
+        help="record how the cost per frame grows with the map: OUT/scale.json, scale.md and "
+        "scale.png (per-module ms per frame and map size for each tenth of the run, peak "
+        "memory, last tenth / first tenth), e.g. --scale-report",
+    )
     p.set_defaults(func=main)
     return p
 
@@ -280,6 +287,22 @@ def write_outputs(
     return metrics
 
 
+def _write_scale_report(recorder: Any, slam: Any, out: Path, label: str) -> dict[str, Any]:
+    """OUT/scale.json, scale.md and scale.png of a run recorded with --scale-report."""
+    from torchratslam.eval.scale import format_scale_table
+    from torchratslam.viz.scale import plot_scale
+
+    parts = min(10, len(recorder.templates))
+    report = recorder.report(slam.timings, parts=parts)
+    _atomic_text(out / "scale.json", json.dumps(report, indent=2) + "\n")
+    _atomic_text(out / "scale.md", format_scale_table(report, title=label) + "\n")
+    plot_scale(out / "scale.png", {"torchratslam": report}, title=label)
+    return {
+        "last_over_first": report["last_over_first"],
+        "peak_memory_mb": report["peak_memory_mb"],
+    }
+
+
 def _json_default(v: Any) -> Any:
     if isinstance(v, np.generic):
         return v.item()
@@ -342,7 +365,17 @@ def main(args: argparse.Namespace) -> int:
         slam = MultiSessionRatSLAM(config, stored, **kwargs)
     else:
         slam = RatSLAM(config, **kwargs)
-    result = slam.run(data, max_frames=args.max_frames, progress=not args.no_progress)
+    recorder = None
+    if getattr(args, "scale_report", False):
+        from torchratslam.eval.scale import ScaleRecorder
+
+        recorder = ScaleRecorder(links_of=lambda: slam.experience_map.num_links)
+    result = slam.run(
+        data,
+        max_frames=args.max_frames,
+        progress=not args.no_progress,
+        callback=None if recorder is None else recorder.on_step,
+    )
     if result.frames == 0:
         raise InputError(f"{args.data}: no frames were read; check the dataset")
     extra = {"data": str(args.data), "config": str(args.config)}
@@ -351,6 +384,8 @@ def main(args: argparse.Namespace) -> int:
     if args.load:
         extra["loaded"] = [str(p) for p in args.load]
     metrics = write_outputs(slam, out, result, data=data, extra=extra)
+    if recorder is not None:
+        metrics["scale"] = _write_scale_report(recorder, slam, out, str(args.data))
     line = (
         f"{metrics['frames_this_run']} frames in {metrics['wall_s']:.1f} s "
         f"({metrics['fps']:.1f} frames/s): {metrics['templates']} templates, "
