@@ -6,10 +6,10 @@ import math
 import numpy as np
 import pytest
 import torch
-from torchratslam.graph.messages import Action, ActionKind
 
 from torchratslam.config import RatSLAMConfig
 from torchratslam.errors import ConfigError, InputError
+from torchratslam.graph.messages import Action, ActionKind
 from torchratslam.messages import Frame, ViewMatch
 from torchratslam.pipeline import QUEUE_SIZE, RatSLAM
 from torchratslam.registry import EXPERIENCE_MAPS, LOCAL_VIEWS, ODOMETRY, POSE_CELLS

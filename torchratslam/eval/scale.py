@@ -17,6 +17,7 @@ Example:
 from __future__ import annotations
 
 import csv
+import itertools
 import logging
 import resource
 import sys
@@ -85,7 +86,7 @@ def scale_report(
         ms["total"] = np.sum(list(ms.values()), axis=0)
     edges = np.linspace(0, n, parts + 1).round().astype(np.int64)
     rows = []
-    for a, b in zip(edges[:-1], edges[1:], strict=True):
+    for a, b in itertools.pairwise(edges):
         row: dict[str, Any] = {"first": int(a), "last": int(b) - 1}
         row["ms"] = {k: float(v[a:b].mean()) for k, v in ms.items()}
         row.update({k: int(v[b - 1]) for k, v in cn.items()})

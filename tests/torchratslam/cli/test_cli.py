@@ -101,9 +101,8 @@ def test_compare_backends_on_a_saved_state_and_a_g2o_file(run_out, tmp_path, cap
     printed = capsys.readouterr().out
     assert "| alpha |" in printed and "| gtsam |" in printed
 
-    from torchratslam.graph.io import write_g2o
-
     from torchratslam.cli.compare_backends import load_posegraph
+    from torchratslam.graph.io import write_g2o
 
     pg = load_posegraph(out / "state")
     g2o = tmp_path / "map.g2o"

@@ -6,9 +6,9 @@ import json
 
 import numpy as np
 import pytest
-from torchratslam.graph.errors import InputError
 
 from torchratslam.eval.scale import format_scale_table, read_openratslam_trace, scale_report
+from torchratslam.graph.errors import InputError
 
 
 def test_scale_report_matches_a_loop_over_the_spans():

@@ -5,6 +5,7 @@ import math
 import gtsam
 import numpy as np
 import pytest
+
 from torchratslam.graph.backends import GraphErrorEvaluator, make_backend
 from torchratslam.graph.backends import alpha as alpha_module
 from torchratslam.graph.backends.alpha import (

@@ -14,6 +14,7 @@ import math
 import networkx as nx
 import numpy as np
 import pytest
+
 from torchratslam.graph.errors import GraphError, InputError, MapFormatError
 from torchratslam.graph.experience_map import ExperienceMap
 from torchratslam.graph.messages import Action, ActionKind

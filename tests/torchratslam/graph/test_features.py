@@ -10,6 +10,7 @@ import math
 
 import numpy as np
 import pytest
+
 from torchratslam.graph.errors import GraphError, InputError
 from torchratslam.graph.experience_map import ExperienceMap
 from torchratslam.graph.features import (

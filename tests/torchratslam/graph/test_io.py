@@ -3,6 +3,7 @@
 import gtsam
 import numpy as np
 import pytest
+
 from torchratslam.graph.errors import InputError, MapFormatError
 from torchratslam.graph.io import (
     CITY_SIGMAS,

@@ -12,8 +12,8 @@ import pytest
 import torch
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from torchratslam.graph.errors import ConfigError, InputError, MapFormatError
 
+from torchratslam.graph.errors import ConfigError, InputError, MapFormatError
 from torchratslam.mbaram.model import (
     LASER_CHANNELS,
     MBARAM,

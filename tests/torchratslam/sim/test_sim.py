@@ -9,9 +9,9 @@ import math
 import cv2
 import numpy as np
 import pytest
-from torchratslam.graph.errors import InputError
 
 from torchratslam.cli import main as cli_main
+from torchratslam.graph.errors import InputError
 from torchratslam.sim import (
     Camera,
     Laser,
