@@ -38,6 +38,7 @@ from typing import Any, Protocol
 
 import networkx as nx
 import numpy as np
+
 from torchratslam.graph.errors import GraphError, InputError, MapFormatError
 from torchratslam.graph.features import (
     Route,

@@ -22,6 +22,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+
 from torchratslam.graph.errors import InputError
 
 TWO_PI = 2.0 * np.pi

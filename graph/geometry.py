@@ -6,6 +6,7 @@ Torch-free so that both ``graph`` and the torch front end can use it.
 from __future__ import annotations
 
 import numpy as np
+
 from torchratslam.graph.errors import InputError
 
 

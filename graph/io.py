@@ -26,6 +26,7 @@ import tempfile
 from pathlib import Path
 
 import numpy as np
+
 from torchratslam.graph.errors import InputError, MapFormatError
 from torchratslam.graph.posegraph import PoseGraph, compose_odometry
 

@@ -16,6 +16,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
+
 from torchratslam.graph.errors import InputError
 
 TWO_PI = 2.0 * np.pi

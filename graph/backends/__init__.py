@@ -5,6 +5,9 @@
 
 - "alpha": the RatSLAM rule (Eq. 8), vectorised over colour classes of links (fast).
 - "alpha_reference": the same rule in OpenRatSLAM's order, a plain Python loop (slow).
+- "alpha_local": the same rule (colour order) only on the links the change since the
+  previous call reaches, sweep after sweep until it dies down: a per-frame cost that
+  follows the change, not the map's size (long runs).
 - "gtsam": batch Levenberg-Marquardt (ignores ``passes``).
 - "isam2": incremental iSAM2; keeps its state between calls and only adds what was
   appended to the graph (rebuilds after any other change).
@@ -17,7 +20,9 @@ from __future__ import annotations
 from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
+
 from torchratslam.graph.backends.alpha import AlphaBackend, AlphaReferenceBackend
+from torchratslam.graph.backends.alpha_local import AlphaLocalBackend
 from torchratslam.graph.backends.gtsam_backend import (
     GraphErrorEvaluator,
     GtsamBackend,
@@ -48,6 +53,7 @@ class Backend(Protocol):
 BACKENDS: dict[str, type] = {
     "alpha": AlphaBackend,
     "alpha_reference": AlphaReferenceBackend,
+    "alpha_local": AlphaLocalBackend,
     "gtsam": GtsamBackend,
     "isam2": ISAM2Backend,
 }
@@ -57,7 +63,7 @@ def make_backend(name: str, **options: Any) -> Backend:
     """Create a backend by name.
 
     Args:
-        name: "alpha", "alpha_reference", "gtsam" or "isam2".
+        name: "alpha", "alpha_reference", "alpha_local", "gtsam" or "isam2".
         **options: constructor options of that backend (e.g. ``sigmas=(0.1, 0.1, 0.05)``
             for gtsam/isam2, ``schedule="reference"`` for alpha).
 
@@ -75,6 +81,7 @@ def make_backend(name: str, **options: Any) -> Backend:
 __all__ = [
     "BACKENDS",
     "AlphaBackend",
+    "AlphaLocalBackend",
     "AlphaReferenceBackend",
     "Backend",
     "GraphErrorEvaluator",

@@ -44,6 +44,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+
 from torchratslam.graph.errors import ConfigError
 from torchratslam.graph.posegraph import TWO_PI, PoseGraph
 

@@ -20,6 +20,7 @@ from collections.abc import Sequence
 
 import gtsam
 import numpy as np
+
 from torchratslam.graph.errors import ConfigError, GraphError
 from torchratslam.graph.posegraph import PoseGraph, UnionFind, wrap_angle
 

@@ -65,7 +65,7 @@ def register(subparsers: Any) -> argparse.ArgumentParser:
     )
     p.add_argument(
         "--backend",
-        choices=("alpha", "alpha_reference", "gtsam", "isam2"),
+        choices=("alpha", "alpha_local", "alpha_reference", "gtsam", "isam2"),
         help="experience-map relaxation backend (overrides exp_backend), e.g. --backend isam2",
     )
     p.add_argument(
