@@ -14,6 +14,7 @@ import os
 import time
 
 import numpy as np
+
 from torchratslam.graph.backends import GraphErrorEvaluator, make_backend
 from torchratslam.graph.geometry import ate_rmse
 from torchratslam.graph.io import example_file, read_posegraph, read_poses

@@ -2,21 +2,22 @@
 
 ``alpha`` sweeps every link of the map ``exp_loops`` times (or once, to find that
 nothing moves): its cost per frame grows with the map, so a long run slows down frame
-by frame. ``alpha_local`` applies the same rule (Eq. 8 of the multisession paper, the
-same Gauss-Seidel colour order as ``alpha``) only to the links that can have an error:
+by frame. ``alpha_local`` applies the same rule (Eq. 8 of the multisession paper) only
+to the links that can have an error:
 
 1. The first sweep of a call visits the links that touch a node that is new or moved
    since the previous call, or a link that is new.
 2. Each later sweep visits the links that touch a node the previous sweep moved by more
-   than ``tol`` (metres for x and y, radians for th): the correction spreads out from
-   the change like a wave and stops where it has died down.
+   than ``tol`` in total (x, y in metres plus th in radians): the correction spreads out
+   from the change like a wave and stops where it has died down.
 3. At most ``passes`` sweeps (``exp_loops``), as ``alpha``.
 
-A new experience whose link agrees with the odometry costs one sweep of two links; a
-loop closure relaxes the loop it closes, for as many frames as the wave needs. Nodes the
-wave never reaches stay where they are, where ``alpha`` would nudge them by less than
-``tol`` per sweep: the two maps differ by that residual. Finding the links of the
-moved nodes is one vectorised mask over the links per sweep (no per-link Python loop).
+Links are visited in creation order, poses updated link after link (Gauss-Seidel, by a
+compiled kernel: ``_local_sweep.py``, numba). A new experience whose link agrees with
+the odometry costs one sweep of its two links; a loop closure relaxes the loop it
+closes, for as many frames as the wave needs. Nodes the wave never reaches stay where
+they are, where ``alpha`` would nudge them by less than ``tol`` per sweep: the two maps
+differ by that residual (measured effect in docs/experience-map.md).
 """
 
 from __future__ import annotations
@@ -25,19 +26,29 @@ import math
 
 import numpy as np
 
-from torchratslam.graph.backends.alpha import EdgeColouring, _check
+from torchratslam.graph.backends.alpha import _check
 from torchratslam.graph.errors import ConfigError
 from torchratslam.graph.posegraph import TWO_PI, PoseGraph
 
 __all__ = ["AlphaLocalBackend"]
 
 
+def _grown(a: np.ndarray, size: int, fill: float | int) -> np.ndarray:
+    """``a`` with room for ``size`` entries (doubling), new entries set to ``fill``."""
+    if len(a) >= size:
+        return a
+    out = np.full(max(size, 2 * len(a), 64), fill, dtype=a.dtype)
+    out[: len(a)] = a
+    return out
+
+
 class AlphaLocalBackend:
     """The alpha rule applied only where the map changed (see the module doc).
 
     Args:
-        tol: a node that a sweep moves by more than this (m, rad) wakes its links for
-            the next sweep; the experience map's own ``tol`` is used when larger.
+        tol: a node that a sweep moves by more than this (|dx| + |dy| + |dth|, m and
+            rad) wakes its links for the next sweep; the caller's ``tol`` is used when
+            larger.
     """
 
     name = "alpha_local"
@@ -48,95 +59,157 @@ class AlphaLocalBackend:
         if not (isinstance(tol, (int, float)) and tol > 0 and math.isfinite(tol)):
             raise ConfigError(f"alpha_local tol must be a positive number, got {tol!r}")
         self.tol = float(tol)
-        self._colouring = EdgeColouring()
+        self._nodes = 0
+        self._links = 0
+        self._head = np.full(0, -1, np.int64)
+        self._nxt = np.zeros(0, np.int64)
+        self._inc = np.zeros(0, np.int64)
+        self._seen = np.full(0, -1, np.int64)
+        self._moved = np.zeros(0)
+        self._touched = np.zeros(0, np.int64)
+        self._active = np.zeros(0, np.int64)
+        self._stamp = 0
         self._last: np.ndarray | None = None
+        self._edge_prefix = np.zeros((0, 2), np.int64)
         self.last_passes = 0
-        """Sweeps the last :meth:`relax` ran."""
+        """Sweeps the last call ran."""
         self.last_converged = False
-        """True if the last :meth:`relax` stopped because the wave died down."""
+        """True if the last call stopped because the wave died down."""
         self.last_links = 0
-        """Link updates the last :meth:`relax` made (summed over its sweeps)."""
+        """Link updates the last call made (summed over its sweeps)."""
 
     def reset(self) -> None:
-        """Forget the colouring and the poses of the previous call."""
+        """Forget the graph seen so far: the next call relaxes every link once."""
         self.__init__(self.tol)
 
-    def _dirty(self, pg: PoseGraph, p: np.ndarray, old_edges: int, kept: bool) -> np.ndarray:
-        """Nodes new or moved since the previous call, and the ends of new links."""
-        n = len(p)
-        last = self._last
-        if not kept or last is None or len(last) > n:
-            return np.ones(n, bool)
-        dirty = np.zeros(n, bool)
-        m = len(last)
-        dirty[m:] = True
-        dirty[:m] = np.any(p[:m] != last, axis=1)
-        dirty[pg.edges[old_edges:].ravel()] = True
-        return dirty
+    def relax_inplace(
+        self,
+        pose: np.ndarray,
+        src: np.ndarray,
+        dst: np.ndarray,
+        link: np.ndarray,
+        *,
+        passes: int,
+        correction: float = 0.5,
+        tol: float = 0.0,
+        changed: np.ndarray | None = None,
+    ) -> np.ndarray:
+        """Relax the experience map's own arrays in place (no copy of the map).
+
+        The links must extend the ones of the previous call (RatSLAM appends them);
+        nodes and links beyond the previous call's, and the ``changed`` nodes (moved by
+        someone else since), start the wave. Fewer nodes or links than before: the
+        backend starts afresh and relaxes every link once.
+
+        Args:
+            pose: poses, updated in place.
+            src, dst: the links' ends.
+            link: ``[d, heading, facing, ...]`` of each link (relative to the source).
+            passes: at most this many sweeps.
+            correction: ``exp_correction``.
+            tol: the caller's tolerance (the larger of it and the backend's is used).
+            changed: nodes moved since the previous call, if any.
+
+        Shape:
+            pose: (N, 3) float64, C-contiguous; src, dst: (E,) int64; link: (E, >= 3).
+
+        Returns:
+            ``pose``.
+        """
+        from torchratslam.graph.backends._local_sweep import add_links, local_sweeps
+
+        _check(passes, correction)
+        n, e = len(pose), len(src)
+        old_n, old_e = self._nodes, self._links
+        if n < old_n or e < old_e:
+            self.reset()
+            old_n = old_e = 0
+        self._head = _grown(self._head, n, -1)
+        self._moved = _grown(self._moved, n, 0.0)
+        for name, size, fill in (
+            ("_nxt", 2 * e, -1),
+            ("_inc", 2 * e, 0),
+            ("_seen", e, -1),
+            ("_touched", 2 * e + 1, 0),
+            ("_active", e, 0),
+        ):
+            setattr(self, name, _grown(getattr(self, name), size, fill))
+        add_links(self._head, self._nxt, self._inc, src, dst, old_e, e)
+        parts = [np.arange(old_n, n), src[old_e:], dst[old_e:]]
+        if changed is not None:
+            parts.append(np.asarray(changed, np.int64))
+        if old_e == 0:
+            parts.append(np.arange(n))
+        dirty = np.concatenate(parts).astype(np.int64)
+        self._nodes, self._links = n, e
+        self.last_passes, self.last_links, self.last_converged = 0, 0, True
+        if passes == 0 or e == 0:
+            return pose
+        ran, links, converged = local_sweeps(
+            pose,
+            src,
+            dst,
+            link,
+            self._head,
+            self._nxt,
+            self._inc,
+            dirty,
+            len(dirty),
+            self._seen,
+            self._stamp,
+            self._moved,
+            self._touched,
+            self._active,
+            int(passes),
+            float(correction),
+            max(float(tol), self.tol),
+        )
+        self._stamp += int(passes) + 1
+        self.last_passes, self.last_links, self.last_converged = int(ran), int(links), converged
+        return pose
 
     def relax(
         self, pg: PoseGraph, *, passes: int, correction: float = 0.5, tol: float = 0.0
     ) -> np.ndarray:
         """Relax the links reached by the change since the previous call.
 
+        The generic interface: it compares the graph with the previous call's (new
+        nodes and links, moved poses; any other change starts afresh) and copies the
+        poses, so it costs O(N) per call; the experience map calls
+        :meth:`relax_inplace` on its own arrays instead.
+
         Args:
-            pg: the graph (its edge list should grow by appending, as RatSLAM's does;
-                any other change relaxes every link, like ``alpha``).
+            pg: the graph (its edge list should grow by appending, as RatSLAM's does).
             passes: at most this many sweeps.
             correction: ``exp_correction`` (the rule's ``c``).
-            tol: the caller's convergence tolerance; the larger of it and the
-                backend's ``tol`` decides which moved nodes wake their links.
+            tol: the caller's convergence tolerance.
 
         Shape:
             returns ``(N, 3)`` float64 poses, angles in ``[-pi, pi)``.
         """
-        _check(passes, correction)
-        p = pg.poses.copy()
-        self.last_passes, self.last_converged, self.last_links = 0, True, 0
-        if passes == 0 or pg.num_edges == 0:
-            self._last = p.copy()
-            return p
-        old_edges = len(self._colouring.edges)
-        kept = self._colouring.update(pg.edges)
-        dirty = self._dirty(pg, p, old_edges, kept)
-        wake = max(float(tol), self.tol)
-        src, dst = pg.edges[:, 0], pg.edges[:, 1]
-        colour = self._colouring.colour
-        meas = pg.measurements
-        z = p[:, 0] + 1j * p[:, 1]
-        th = p[:, 2].copy()
-        c = float(correction)
-        self.last_converged = False
-        for _ in range(passes):
-            active = np.flatnonzero(dirty[src] | dirty[dst])
-            if active.size == 0:
-                self.last_converged = True
-                break
-            self.last_passes += 1
-            self.last_links += int(active.size)
-            # the global colour order restricted to the active links: each class is a
-            # matching, so applying it at once is applying its links one by one
-            active = active[np.lexsort((active, colour[active]))]
-            bounds = np.flatnonzero(np.diff(colour[active])) + 1
-            touched = np.unique(pg.edges[active].ravel())
-            z0, th0 = z[touched], th[touched]
-            for links in np.split(active, bounds):
-                f, t = src[links], dst[links]
-                m = meas[links]
-                err = (z[t] - z[f] - np.exp(1j * th[f]) * (m[:, 0] + 1j * m[:, 1])) * c
-                z[f] += err
-                z[t] -= err
-                raw = th[t] - th[f] - m[:, 2]
-                df = (raw - TWO_PI * np.rint(raw / TWO_PI)) * c
-                th[f] += df
-                th[t] -= df
-            dth = th[touched] - th0
-            dth -= TWO_PI * np.rint(dth / TWO_PI)
-            moved = np.maximum(np.abs(z[touched] - z0), np.abs(dth)) > wake
-            dirty = np.zeros(len(p), bool)
-            dirty[touched[moved]] = True
-        else:
-            self.last_converged = not dirty.any()
-        out = np.stack([z.real, z.imag, np.remainder(th + math.pi, TWO_PI) - math.pi], axis=1)
+        p = np.ascontiguousarray(pg.poses, dtype=np.float64).copy()
+        e = pg.num_edges
+        old_e = min(self._links, e)
+        changed = None
+        appended = (
+            self._last is not None
+            and e >= self._links
+            and len(p) >= len(self._last)
+            and np.array_equal(pg.edges[:old_e], self._edge_prefix[:old_e])
+        )
+        if not appended:
+            self.reset()
+        elif self._last is not None:
+            m = len(self._last)
+            changed = np.flatnonzero(np.any(p[:m] != self._last, axis=1))
+        m = pg.measurements
+        link = np.stack([np.hypot(m[:, 0], m[:, 1]), np.arctan2(m[:, 1], m[:, 0]), m[:, 2]], 1)
+        src = np.ascontiguousarray(pg.edges[:, 0])
+        dst = np.ascontiguousarray(pg.edges[:, 1])
+        out = self.relax_inplace(
+            p, src, dst, link, passes=passes, correction=correction, tol=tol, changed=changed
+        )
+        out[:, 2] = np.remainder(out[:, 2] + math.pi, TWO_PI) - math.pi
         self._last = out.copy()
+        self._edge_prefix = pg.edges.copy()
         return out
