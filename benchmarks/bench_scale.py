@@ -24,7 +24,6 @@ from __future__ import annotations
 import csv
 import json
 import os
-import resource
 import subprocess
 import sys
 import time
@@ -88,13 +87,31 @@ def run_cpp(build: Path, data: Path, out: Path) -> dict[str, Any] | None:
     if not exe.exists():
         return None
     out.mkdir(parents=True, exist_ok=True)
+    # a fresh Python process runs the driver, so RUSAGE_CHILDREN is the driver's alone
+    probe = (
+        "import resource, subprocess, sys\n"
+        "with open(sys.argv[1], 'w') as log:\n"
+        "    subprocess.run(sys.argv[2:], check=True, stdout=log)\n"
+        "print(resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss)\n"
+    )
     t0 = time.perf_counter()
-    with (out / "stdout.log").open("w") as log:
-        subprocess.run(
-            [str(exe), str(data / "config.txt"), str(data), str(out)], check=True, stdout=log
-        )
+    done = subprocess.run(
+        [
+            sys.executable,
+            "-c",
+            probe,
+            str(out / "stdout.log"),
+            str(exe),
+            str(data / "config.txt"),
+            str(data),
+            str(out),
+        ],
+        check=True,
+        capture_output=True,
+        text=True,
+    )
     wall = time.perf_counter() - t0
-    peak = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024.0
+    peak = float(done.stdout.strip().splitlines()[-1]) / 1024.0
     rep = read_openratslam_trace(out / "frames.csv")
     with (out / "frames.csv").open(newline="") as fh:
         ids = np.array([int(r["current_exp_id"]) for r in csv.DictReader(fh)])
