@@ -620,6 +620,24 @@ class ExperienceMap:
         key = (self._version, id(self.params), id(backend))
         if self._fixed_at == key:
             return
+        relax_inplace = getattr(backend, "relax_inplace", None)
+        if callable(relax_inplace):
+            # alpha_local: the map's own arrays, relaxed only where the map changed, so
+            # the cost follows the change, not the map's size (no O(N) work here)
+            n, e = self._n, self._e
+            relax_inplace(
+                self._pose[:n],
+                self._src[:e],
+                self._dst[:e],
+                self._link[:e],
+                passes=loops,
+                correction=self.params.exp_correction,
+            )
+            self._poses_dirty = True
+            self._version += 1
+            if getattr(backend, "last_converged", False):
+                self._fixed_at = (self._version, id(self.params), id(backend))
+            return
         pg = self.posegraph()
         kw: dict[str, float] = {"correction": self.params.exp_correction}
         if getattr(backend, "accepts_tol", False):

@@ -130,7 +130,9 @@ class ExperienceMapParams(Params):
     exp_correction: float = param(0.5, "alpha of the relaxation rule (Eq. 8)", gt=0.0, le=1.0)
     exp_loops: int = param(10, "relaxation passes per step", ge=0)
     exp_initial_em_deg: float = param(90.0, "initial heading of the map (degrees)")
-    exp_backend: str = param("alpha", "relaxation backend: alpha | gtsam | isam2")
+    exp_backend: str = param(
+        "alpha", "relaxation backend: alpha | alpha_local | alpha_reference | gtsam | isam2"
+    )
     # Experience-map paper (Milford, Wyeth & Prasser 2006) features; defaults keep
     # OpenRatSLAM's behaviour (no averaging, no link deletion).
     exp_activity_zone_xy: float = param(

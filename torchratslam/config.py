@@ -307,3 +307,32 @@ def load_config(path: str | Path | None = None, **overrides: Any) -> RatSLAMConf
     flat = _read_yaml(p) if p.suffix.lower() in (".yaml", ".yml") else _read_openratslam_txt(p)
     flat.update(overrides)
     return RatSLAMConfig.from_flat(flat, source=str(p))
+
+
+def to_openratslam_txt(config: RatSLAMConfig, *, comment: str = "") -> str:
+    """The config as an OpenRatSLAM ini-style ``.txt`` file (what its nodes read).
+
+    ``[general]`` holds ``topic_root``, ``[visual_odometry]`` the visual-odometry keys and
+    ``[ratslam]`` every other key (OpenRatSLAM ignores the keys it does not know, and
+    :func:`load_config` reads every one back, so the round trip is exact). Booleans are
+    written as 0/1 and integral floats without a fraction (OpenRatSLAM reads some keys
+    as ints).
+
+    Args:
+        config: the configuration.
+        comment: an optional first comment line (``;`` is prefixed).
+
+    Returns:
+        The file's text.
+    """
+    sections: dict[str, list[str]] = {"general": [], "ratslam": [], "visual_odometry": []}
+    for attr in config.sections():
+        target = attr if attr in ("general", "visual_odometry") else "ratslam"
+        for key, value in getattr(config, attr).to_dict().items():
+            if isinstance(value, bool) or (isinstance(value, float) and value.is_integer()):
+                value = int(value)  # C++ reads "2" as an int or a double, "2.0" only as a double
+            sections[target].append(f"{key}={value}")
+    lines = [f"; {comment}"] if comment else []
+    for name, entries in sections.items():
+        lines += [f"[{name}]", *entries, ""]
+    return "\n".join(lines)

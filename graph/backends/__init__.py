@@ -5,6 +5,9 @@
 
 - "alpha": the RatSLAM rule (Eq. 8), vectorised over colour classes of links (fast).
 - "alpha_reference": the same rule in OpenRatSLAM's order, a plain Python loop (slow).
+- "alpha_local": the same rule (colour order) only on the links the change since the
+  previous call reaches, sweep after sweep until it dies down: a per-frame cost that
+  follows the change, not the map's size (long runs).
 - "gtsam": batch Levenberg-Marquardt (ignores ``passes``).
 - "isam2": incremental iSAM2; keeps its state between calls and only adds what was
   appended to the graph (rebuilds after any other change).
@@ -22,6 +25,7 @@ from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
 
 import numpy as np
 from torchratslam.graph.backends.alpha import AlphaBackend, AlphaReferenceBackend
+from torchratslam.graph.backends.alpha_local import AlphaLocalBackend
 from torchratslam.graph.errors import ConfigError, unknown_name_message
 from torchratslam.graph.posegraph import PoseGraph
 
@@ -77,6 +81,7 @@ def _lazy_gtsam(class_name: str) -> Callable[..., Any]:
 BACKENDS: dict[str, Callable[..., Any]] = {
     "alpha": AlphaBackend,
     "alpha_reference": AlphaReferenceBackend,
+    "alpha_local": AlphaLocalBackend,
     "gtsam": _lazy_gtsam("GtsamBackend"),
     "isam2": _lazy_gtsam("ISAM2Backend"),
 }
@@ -86,7 +91,7 @@ def make_backend(name: str, **options: Any) -> Backend:
     """Create a backend by name.
 
     Args:
-        name: "alpha", "alpha_reference", "gtsam" or "isam2".
+        name: "alpha", "alpha_reference", "alpha_local", "gtsam" or "isam2".
         **options: constructor options of that backend (e.g. ``sigmas=(0.1, 0.1, 0.05)``
             for gtsam/isam2, ``schedule="reference"`` for alpha).
 
@@ -105,6 +110,7 @@ def make_backend(name: str, **options: Any) -> Backend:
 __all__ = [
     "BACKENDS",
     "AlphaBackend",
+    "AlphaLocalBackend",
     "AlphaReferenceBackend",
     "Backend",
     "GraphErrorEvaluator",

@@ -134,6 +134,13 @@ def register(subparsers: Any) -> argparse.ArgumentParser:
         "threads mostly add overhead), e.g. --threads 4",
     )
     p.add_argument("--no-progress", action="store_true", help="no progress bar, e.g. --no-progress")
+    p.add_argument(
+        "--scale-report",
+        action="store_true",
+        help="record how the cost per frame grows with the map: OUT/scale.json, scale.md and "
+        "scale.png (per-module ms per frame and map size for each tenth of the run, peak "
+        "memory, last tenth / first tenth), e.g. --scale-report",
+    )
     p.set_defaults(func=main)
     return p
 
@@ -177,6 +184,7 @@ def main(args: argparse.Namespace) -> int:
         max_frames=args.max_frames,
         progress=not args.no_progress,
         threads=args.threads,
+        scale_report=args.scale_report,
     )
     print(summary_line(metrics, Path(args.out)))
     return 0

@@ -61,6 +61,7 @@ def run(args: argparse.Namespace) -> int:
     """Build the tour and write its dataset(s); prints a JSON summary."""
     from torchratslam.sim import get_tour, write_dataset
     from torchratslam.sim.dataset import parse_sim_spec
+    from torchratslam.sim.tours import TOUR_PRESETS
 
     spec = args.name if args.name.startswith("sim:") else f"sim:{args.name}"
     name, session, options = parse_sim_spec(spec)
@@ -81,6 +82,20 @@ def run(args: argparse.Namespace) -> int:
         if args.max_frames is not None:
             s = s.subset(0, args.max_frames)
         write_dataset(s, d, overwrite=args.overwrite, progress=not args.quiet)
-        written.append({"session": s.name, "frames": len(s), "dir": str(d)})
+        entry = {"session": s.name, "frames": len(s), "dir": str(d)}
+        if name in TOUR_PRESETS:  # OpenRatSLAM runs on the data as it is with this config
+            entry["config"] = str(_write_config_txt(TOUR_PRESETS[name], Path(d)))
+        written.append(entry)
     print(json.dumps({"tour": name, "seed": seed, "datasets": written}, indent=2))
     return 0
+
+
+def _write_config_txt(preset: str, directory: Path) -> Path:
+    """Write the preset as ``directory/config.txt`` in OpenRatSLAM's ini format."""
+    from torchratslam.config import load_config, to_openratslam_txt
+    from torchratslam.graph.io import atomic_write_text
+
+    path = directory / "config.txt"
+    text = to_openratslam_txt(load_config(preset), comment=f"torchratslam preset {preset!r}")
+    atomic_write_text(path, text)
+    return path

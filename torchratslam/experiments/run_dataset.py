@@ -228,6 +228,7 @@ def run_dataset(
     max_frames: int | None = None,
     progress: bool = True,
     threads: int = 1,
+    scale_report: bool = False,
 ) -> dict[str, Any]:
     """Map one dataset (localising in and merging with the ``load`` maps, if any) and
     write OUT; returns the metrics (what ``metrics.json`` holds).
@@ -246,6 +247,8 @@ def run_dataset(
         max_frames: stop after this many frames.
         progress: a progress bar.
         threads: torch intra-op threads.
+        scale_report: record the cost per frame as the map grows (OUT/scale.json,
+            scale.md, scale.png; :mod:`torchratslam.eval.scale`).
 
     Raises:
         InputError: bad counts, unreadable data, no frames, OUT not a directory.
@@ -284,7 +287,17 @@ def run_dataset(
         slam: Any = MultiSessionRatSLAM(config, [load_state(p) for p in load], **kwargs)
     else:
         slam = RatSLAM(config, **kwargs)
-    result = slam.run(data, max_frames=max_frames, progress=progress)
+    recorder = None
+    if scale_report:
+        from torchratslam.eval.scale import ScaleRecorder
+
+        recorder = ScaleRecorder(links_of=lambda: slam.experience_map.num_links)
+    result = slam.run(
+        data,
+        max_frames=max_frames,
+        progress=progress,
+        callback=None if recorder is None else recorder.on_step,
+    )
     if result.frames == 0:
         raise InputError(f"{data_spec}: no frames were read; check the dataset")
     extra: dict[str, Any] = {"data": str(data_spec), "config": str(config_spec)}
@@ -292,7 +305,22 @@ def run_dataset(
         extra["odometry"] = "visual"
     if load:
         extra["loaded"] = [str(p) for p in load]
-    return write_outputs(slam, out, result, data=data, extra=extra)
+    metrics = write_outputs(slam, out, result, data=data, extra=extra)
+    if recorder is not None:
+        metrics["scale"] = _write_scale_report(recorder, slam, out, str(data_spec))
+    return metrics
+
+
+def _write_scale_report(recorder: Any, slam: Any, out: Path, label: str) -> dict[str, Any]:
+    """OUT/scale.json, scale.md and scale.png of a run recorded with ``scale_report``."""
+    from torchratslam.eval.scale import format_scale_table
+    from torchratslam.viz.scale import plot_scale
+
+    report = recorder.report(slam.timings, parts=min(10, len(recorder.templates)))
+    _atomic_text(out / "scale.json", json.dumps(report, indent=2) + "\n")
+    _atomic_text(out / "scale.md", format_scale_table(report, title=label) + "\n")
+    plot_scale(out / "scale.png", {"torchratslam": report}, title=label)
+    return {k: report[k] for k in ("last_over_first", "peak_memory_mb")}
 
 
 def summary_line(metrics: dict[str, Any], out: Path) -> str:

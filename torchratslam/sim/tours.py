@@ -13,6 +13,11 @@
   which joins all four (433).
 * ``loop``: a corridor loop (38.3 m lap), 256x64 panoramic, 5 Hz, lasers on.
   session1: 6 laps, 1781 frames.
+* ``suburb`` (issue 16, St Lucia-like): an 8 x 8 block street grid (40 m blocks, 12 m
+  streets, buildings of varied heights and facades); a car with a 128x64 forward camera
+  (60 degrees, 1.5 m up) at 10 m/s, 10 Hz; 20000 frames driving most streets several
+  times in both directions. Options ``blocks``, ``block_size``, ``street_width``,
+  ``frames``, ``speed``, ``hz``.
 
 Every tour takes ``seed`` (textures, odometry noise, obstacles) and these options:
 
@@ -55,7 +60,7 @@ from torchratslam.sim.motion import (
 from torchratslam.sim.render import Camera, render
 from torchratslam.sim.world import World, WorldBuilder, make_texture
 
-__all__ = ["TOURS", "Obstacles", "Session", "Tour", "get_tour"]
+__all__ = ["TOURS", "TOUR_PRESETS", "Obstacles", "Session", "Tour", "get_tour"]
 
 Point = tuple[float, float]
 
@@ -1092,6 +1097,120 @@ def loop(
     )
 
 
+def _grid_drive(
+    rng: np.random.Generator, n_nodes: int, length_needed: float, pitch: float
+) -> list[tuple[int, int]]:
+    """Intersections visited by a drive through an ``n_nodes`` x ``n_nodes`` street grid.
+
+    From the south-west corner heading east, at every intersection the car goes
+    straight, left or right (a U-turn only at a dead end), choosing the directed street
+    it has driven least often (ties at random): every street gets driven in both
+    directions, again and again, and the drive closes many loops.
+    """
+    visits: dict[tuple[tuple[int, int], tuple[int, int]], int] = {}
+    node, heading = (0, 0), (1, 0)
+    path = [node]
+    total = 0.0
+    while total < length_needed:
+        left, right = (-heading[1], heading[0]), (heading[1], -heading[0])
+        options = []
+        for d in (heading, left, right):
+            nxt = (node[0] + d[0], node[1] + d[1])
+            if 0 <= nxt[0] < n_nodes and 0 <= nxt[1] < n_nodes:
+                options.append((visits.get((node, nxt), 0), float(rng.random()), d, nxt))
+        if not options:  # dead end (cannot happen on a full grid): turn round
+            d = (-heading[0], -heading[1])
+            options.append((0, 0.0, d, (node[0] + d[0], node[1] + d[1])))
+        _, _, heading, nxt = min(options)
+        visits[(node, nxt)] = visits.get((node, nxt), 0) + 1
+        node = nxt
+        path.append(node)
+        total += pitch
+    return path
+
+
+def suburb(
+    seed: int = 0,
+    opts: _Opts | None = None,
+    *,
+    blocks: int = 8,
+    block_size: float = 40.0,
+    street_width: float = 12.0,
+    frames: int = 20000,
+    speed: float = 10.0,
+    hz: float = 10.0,
+) -> _Build:
+    """A street grid of ``blocks`` x ``blocks`` city blocks driven by a car (St Lucia-like).
+
+    Every block is a row of buildings of varied heights and facades (each side of a block
+    is split into three to five houses, each with its own texture); a forward camera at
+    car height (1.5 m) looks down the street. The route drives most streets several
+    times in both directions and closes many loops (see :func:`_grid_drive`).
+    """
+    o = opts or _Opts()
+    _positive(blocks=blocks, block_size=block_size, street_width=street_width, speed=speed, hz=hz)
+    _positive(frames=frames - 1)
+    pitch = block_size + street_width
+    n_nodes = int(blocks) + 1
+    wb = WorldBuilder(seed=seed, wall_height=8.0)
+    g = np.random.default_rng([seed, 4242])
+    half = block_size / 2
+    for bx in range(int(blocks)):
+        for by in range(int(blocks)):
+            cx, cy = (bx + 0.5) * pitch, (by + 0.5) * pitch
+            corners = [(cx - half, cy - half), (cx + half, cy - half)]
+            corners += [(cx + half, cy + half), (cx - half, cy + half)]
+            for i in range(4):
+                p, q = np.array(corners[i]), np.array(corners[(i + 1) % 4])
+                cuts = np.sort(g.uniform(0.15, 0.85, int(g.integers(2, 5))))
+                ts = np.r_[0.0, cuts, 1.0]
+                for a, b in itertools.pairwise(ts):
+                    wb.segment(
+                        tuple(p + a * (q - p)),
+                        tuple(p + b * (q - p)),
+                        height=float(g.uniform(5.0, 14.0)),
+                    )
+    edge = street_width / 2 + 3.0  # the city's outer edge: a row of walls past the outer streets
+    far = int(blocks) * pitch
+    wb.polyline(
+        [(-edge, -edge), (far + edge, -edge), (far + edge, far + edge), (-edge, far + edge)],
+        height=10.0,
+    )
+    world = wb.build(name="suburb", floor=0.4, ceiling=0.9)
+    ds = speed / hz
+    n = int(frames)
+    drive = _grid_drive(np.random.default_rng([seed, 31]), n_nodes, (n - 1) * ds + 2 * pitch, pitch)
+    corners = [(i * pitch, j * pitch) for i, j in drive]
+    route = Route.polygon(corners, radius=street_width / 3, closed=False)
+    _check_clear(world, route, street_width / 2 - 0.5)
+    return _Build(
+        world=world,
+        routes={"drive": route},
+        plan=[("session1", route, 0.0, n, ds, hz)],
+        camera=_camera(o, kind="forward", width=128, height=64, fov_deg=60.0, cam_height=1.5),
+        noise=_noise(
+            o,
+            scale_error=0.02,
+            rot_scale_error=0.01,
+            heading_bias=0.001,
+            trans_noise=0.05,
+            rot_noise=0.01,
+        ),
+        lasers=_lasers(o, False),
+        main_route=route,
+        obstacle_size=2.0,
+        obstacle_offset=street_width / 2 - 1.5,
+        pedestrian_offset=street_width / 2 - 1.0,
+        obstacle_height=1.5,
+        scale=4.0,
+        description=(
+            f"suburb: {blocks} x {blocks} city blocks, a car drives most streets several "
+            "times both ways (St Lucia-like)"
+        ),
+        clearance=street_width / 2 - 0.5,
+    )
+
+
 def _positive(**values: float) -> None:
     for key, v in values.items():
         if not isinstance(v, (int, float)) or not v > 0:
@@ -1114,6 +1233,16 @@ TOURS: dict[str, Callable[..., _Build]] = {
     "lab_tour": lab_tour,
     "irat_like": irat_like,
     "loop": loop,
+    "suburb": suburb,
+}
+
+#: The shipped config preset (``configs/NAME.yaml``) that suits each tour; ``torchratslam
+#: simulate`` writes it beside the data as an OpenRatSLAM ``config.txt``.
+TOUR_PRESETS: dict[str, str] = {
+    "virtual_tour": "virtual_tour",
+    "lab_tour": "lab_tour",
+    "irat_like": "irat",
+    "suburb": "suburb",
 }
 
 
