@@ -67,8 +67,8 @@ def local_sweeps(
     A sweep gathers the links touching a dirty node, applies the rule to them in
     creation order, link after link (Gauss-Seidel), and makes dirty for the next sweep
     every node that moved by more than ``wake`` (|dx| + |dy| + |dth| summed over the
-    sweep). Angles stay in ``(-pi, pi]`` (the experience map's convention). The work is proportional to the links of the
-    dirty nodes, never to the map.
+    sweep). Angles stay in ``(-pi, pi]`` (the experience map's convention). The work is
+    proportional to the links of the dirty nodes, never to the map.
 
     Shape:
         pose: (N, 3) ``[x, y, th]``; src, dst: (E,); link: (E, >= 3) ``[d, heading,
