@@ -142,6 +142,14 @@ def register(subparsers: Any) -> argparse.ArgumentParser:
         help="torch intra-op threads (default 1: the per-frame work is small and extra "
         "threads mostly add overhead), e.g. --threads 4",
     )
+    p.add_argument(
+        "--tum",
+        action="store_true",
+        help="also write TUM trajectories for evo: OUT/tum_experience.txt (the current "
+        "experience, as OpenRatSLAM publishes), OUT/tum_frame.txt (experience + odometry "
+        "since it) and OUT/tum_groundtruth.txt; then evo_ape tum OUT/tum_groundtruth.txt "
+        "OUT/tum_frame.txt -a, e.g. --tum",
+    )
     p.add_argument("--no-progress", action="store_true", help="no progress bar, e.g. --no-progress")
     p.set_defaults(func=main)
     return p
@@ -292,6 +300,20 @@ def _jsonable(v: Any) -> Any:
     return json.loads(json.dumps(v, default=_json_default))
 
 
+def _write_tum(slam: Any, out: Path, recorder: Any, data: Any) -> dict[str, Any]:
+    """The TUM files of ``--tum`` and the ATE of each estimate on them (for metrics.json)."""
+    from torchratslam.eval.tum import tum_ate, write_tum_files
+
+    table = data.groundtruth() if hasattr(data, "groundtruth") else None
+    files = write_tum_files(slam, out, recorder=recorder, groundtruth=table)
+    extra: dict[str, Any] = {"tum": {k: p.name for k, p in files.items()}}
+    if "groundtruth" in files and slam.trajectory().shape[0] >= 2:
+        for name in ("experience", "frame"):
+            if name in files:
+                extra[f"ate_{name}_rmse_m"] = tum_ate(files["groundtruth"], files[name])
+    return extra
+
+
 def main(args: argparse.Namespace) -> int:
     import torch
 
@@ -342,10 +364,17 @@ def main(args: argparse.Namespace) -> int:
         slam = MultiSessionRatSLAM(config, stored, **kwargs)
     else:
         slam = RatSLAM(config, **kwargs)
-    result = slam.run(data, max_frames=args.max_frames, progress=not args.no_progress)
+    from torchratslam.eval.tum import FramePoseRecorder
+
+    recorder = FramePoseRecorder()
+    result = slam.run(
+        data, max_frames=args.max_frames, progress=not args.no_progress, callback=recorder
+    )
     if result.frames == 0:
         raise InputError(f"{args.data}: no frames were read; check the dataset")
-    extra = {"data": str(args.data), "config": str(args.config)}
+    extra: dict[str, Any] = {"data": str(args.data), "config": str(args.config)}
+    if args.tum:
+        extra.update(_write_tum(slam, out, recorder, data))
     if odometry_label:
         extra["odometry"] = odometry_label
     if args.load:
@@ -359,5 +388,14 @@ def main(args: argparse.Namespace) -> int:
     if "ate_rmse_m" in metrics:
         ate = metrics["ate_rmse_m"]
         line += f", ATE {ate:.3f} m" if math.isfinite(ate) else ""
+        if "ate_frame_rmse_m" in metrics:
+            line += f" (per-frame pose {metrics['ate_frame_rmse_m']:.3f} m)"
+        dr = metrics.get("dead_reckoning_ate_m")
+        if dr is not None and math.isfinite(dr):
+            line += f" vs dead reckoning {dr:.3f} m"
+    if args.load:
+        merges = metrics.get("merges")
+        n_merges = len(merges) if isinstance(merges, (list, dict)) else 0
+        line += f", {n_merges} merge{'s' if n_merges != 1 else ''}"
     print(f"{line}; wrote {out}")
     return 0
