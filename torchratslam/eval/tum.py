@@ -76,9 +76,9 @@ def write_tum(path: str | Path, t: np.ndarray, poses: np.ndarray, *, comment: st
         )
     ok = np.isfinite(tt) & np.all(np.isfinite(p[:, :3]), axis=1)
     half = 0.5 * p[ok, 2]
+    zero = np.zeros(half.shape)
     rows = np.column_stack(
-        [tt[ok], p[ok, 0], p[ok, 1], np.zeros(half.shape), np.zeros(half.shape)]
-        + [np.zeros(half.shape), np.sin(half), np.cos(half)]
+        [tt[ok], p[ok, 0], p[ok, 1], zero, zero, zero, np.sin(half), np.cos(half)]
     )
     lines = [f"# {comment}"] if comment else []
     lines.append(TUM_HEADER)
@@ -136,8 +136,10 @@ def _associate(t_ref: np.ndarray, t_est: np.ndarray, max_diff: float) -> tuple[n
         return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
     order = np.argsort(t_ref, kind="stable")
     tr = t_ref[order]
-    j = np.clip(np.searchsorted(tr, t_est), 1, tr.size - 1) if tr.size > 1 else np.zeros_like(
-        t_est, dtype=np.int64
+    j = (
+        np.clip(np.searchsorted(tr, t_est), 1, tr.size - 1)
+        if tr.size > 1
+        else np.zeros_like(t_est, dtype=np.int64)
     )
     if tr.size > 1:
         left = np.abs(t_est - tr[j - 1]) <= np.abs(t_est - tr[j])
@@ -334,4 +336,3 @@ def write_tum_files(
             out / "tum_groundtruth.txt", t, gt, comment="ground truth at the frame times"
         )
     return files
-

@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from torchratslam.graph.errors import InputError, MapFormatError
 
 from torchratslam.cli import main
 from torchratslam.config import load_config
@@ -18,7 +19,6 @@ from torchratslam.eval.tum import (
     tum_ate,
     write_tum,
 )
-from torchratslam.graph.errors import InputError, MapFormatError
 from torchratslam.pipeline import RatSLAM
 from torchratslam.readers.datasets import open_data
 
@@ -174,5 +174,6 @@ def test_evo_ape_command_reads_the_files(tum_run):
         timeout=120,
     )
     assert res.returncode == 0, res.stderr
-    rmse = next(float(s.split()[1]) for s in res.stdout.splitlines() if s.strip().startswith("rmse"))
+    lines = res.stdout.splitlines()
+    rmse = next(float(s.split()[1]) for s in lines if s.strip().startswith("rmse"))
     assert rmse == pytest.approx(tum_ate(gt, est), abs=1e-6)
