@@ -153,6 +153,18 @@ def register(subparsers: Any) -> argparse.ArgumentParser:
         "since it) and OUT/tum_groundtruth.txt; then evo_ape tum OUT/tum_groundtruth.txt "
         "OUT/tum_frame.txt -a, e.g. --tum",
     )
+    p.add_argument(
+        "--rerun",
+        action="store_true",
+        help="watch the run live in a rerun viewer (needs torchratslam[viewer]), e.g. --rerun",
+    )
+    p.add_argument(
+        "--rerun-save",
+        metavar="FILE",
+        default=None,
+        help="record the run for the rerun viewer into FILE.rrd (open it with: rerun "
+        "FILE.rrd), e.g. --rerun-save out/run.rrd",
+    )
     p.add_argument("--no-progress", action="store_true", help="no progress bar, e.g. --no-progress")
     p.set_defaults(func=main)
     return p
@@ -370,9 +382,26 @@ def main(args: argparse.Namespace) -> int:
     from torchratslam.eval.tum import FramePoseRecorder
 
     recorder = FramePoseRecorder()
-    result = slam.run(
-        data, max_frames=args.max_frames, progress=not args.no_progress, callback=recorder
-    )
+    callback: Any = recorder
+    frames: Any = data
+    observer = None
+    if args.rerun or args.rerun_save:
+        from torchratslam.viz.rerun_viewer import RerunObserver
+
+        observer = RerunObserver(slam, spawn=args.rerun, save=args.rerun_save)
+        frames = observer.frames(data)
+
+        def callback(r: Any) -> None:
+            recorder(r)
+            observer(r)
+
+    try:
+        result = slam.run(
+            frames, max_frames=args.max_frames, progress=not args.no_progress, callback=callback
+        )
+    finally:
+        if observer is not None:
+            observer.close()
     if result.frames == 0:
         raise InputError(f"{args.data}: no frames were read; check the dataset")
     extra: dict[str, Any] = {"data": str(args.data), "config": str(args.config)}
