@@ -69,6 +69,18 @@ def register(subparsers: Any) -> argparse.ArgumentParser:
     )
     p.add_argument("--no-figures", action="store_true", help="write report.json only")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
+    p.add_argument(
+        "--rerun",
+        action="store_true",
+        help="watch the multisession mapping live in a rerun viewer (torchratslam[viewer]), "
+        "e.g. --rerun",
+    )
+    p.add_argument(
+        "--rerun-save",
+        metavar="FILE",
+        default=None,
+        help="record the multisession mapping for rerun into FILE.rrd, e.g. --rerun-save ms.rrd",
+    )
     p.set_defaults(func=main)
     return p
 
@@ -317,6 +329,7 @@ def run(
     figures: bool = True,
     progress: bool = False,
     overrides: dict[str, Any] | None = None,
+    observer: Any = None,
 ) -> dict[str, Any]:
     """Run the experiment and write OUT (what the CLI and the demo call).
 
@@ -349,6 +362,7 @@ def run(
         save_dir=out,
         progress=progress,
         max_frames=max_frames,
+        observer=observer,
     )
     report = result["report"]
     report["seed"] = seed
@@ -371,7 +385,25 @@ def main(args: argparse.Namespace) -> int:
         if not sep:
             raise ConfigError(f"--set {item!r}: expected KEY=VALUE")
         overrides[key.strip()] = value.strip()
-    result = run(
+    observer = None
+    if args.rerun or args.rerun_save:
+        from torchratslam.viz.rerun_viewer import RerunObserver
+
+        observer = RerunObserver(None, spawn=args.rerun, save=args.rerun_save)
+    try:
+        result = _run_cli(args, backends, overrides, observer)
+    finally:
+        if observer is not None:
+            observer.close()
+    print(report_markdown(result["report"]))
+    print(f"wrote {Path(args.out) / 'report.json'}")
+    return 0
+
+
+def _run_cli(
+    args: argparse.Namespace, backends: tuple[str, ...], overrides: dict[str, Any], observer: Any
+) -> dict[str, Any]:
+    return run(
         args.config,
         args.tour,
         args.out,
@@ -382,7 +414,5 @@ def main(args: argparse.Namespace) -> int:
         figures=not args.no_figures,
         progress=not args.quiet,
         overrides=overrides,
+        observer=observer,
     )
-    print(report_markdown(result["report"]))
-    print(f"wrote {Path(args.out) / 'report.json'}")
-    return 0

@@ -310,6 +310,7 @@ def run_sessions(
     save_dir: Any = None,
     progress: bool = False,
     max_frames: int | None = None,
+    observer: Any = None,
     **ratslam_kwargs: Any,
 ) -> dict[str, Any]:
     """Map ``sessions`` one after another, each starting with the maps the previous
@@ -324,6 +325,9 @@ def run_sessions(
         save_dir: where each session's map is saved (``<dir>/<session>/state``).
         progress: progress bars.
         max_frames: frames per session at most (for quick checks).
+        observer: a :class:`torchratslam.viz.rerun_viewer.RerunObserver` (or anything
+            with ``attach(slam, name)``, ``frames(data)`` and a call per step) that
+            watches every session.
 
     Returns:
         ``maps`` (the maps left, the last one the final), ``names``, ``merges`` (all
@@ -356,7 +360,10 @@ def run_sessions(
         frames = s.frames() if hasattr(s, "frames") else s
         if offsets is not None:
             frames = _shifted(frames, offsets[i])
-        res = ms.run(frames, max_frames=max_frames, progress=progress)
+        if observer is not None:
+            observer.attach(ms, name)
+            frames = observer.frames(frames)
+        res = ms.run(frames, max_frames=max_frames, progress=progress, callback=observer)
         relax_s += float(res.timings.get("experience_map", {}).get("total_s", 0.0))
         state = ms.get_map()
         if save_dir is not None:
@@ -392,6 +399,7 @@ def run_tour(
     save_dir: Any = None,
     progress: bool = False,
     max_frames: int | None = None,
+    observer: Any = None,
     **ratslam_kwargs: Any,
 ) -> dict[str, Any]:
     """Multisession versus single-session mapping of a simulated tour.
@@ -414,6 +422,7 @@ def run_tour(
         progress: progress bars.
         max_frames: frames per session at most (quick checks; the continuous and
             concatenated runs get this many per session, the bridges included).
+        observer: watches the multisession mapping's sessions (see :func:`run_sessions`).
 
     Returns:
         ``report`` (JSON-able: the keys of ``OUT/report.json``) and ``data`` (the maps,
@@ -460,6 +469,7 @@ def run_tour(
         save_dir=sub("multi"),
         progress=progress,
         max_frames=max_frames,
+        observer=observer,
         **ratslam_kwargs,
     )
     final = multi["maps"][-1]

@@ -103,7 +103,7 @@ class RerunObserver:
 
     Args:
         slam: the :class:`~torchratslam.pipeline.RatSLAM` (or a multisession one) whose
-            run is observed.
+            run is observed; None: give it later with :meth:`attach`.
         spawn: start a rerun viewer and stream to it.
         save: write the recording to this ``.rrd`` file (with ``spawn`` as well: the
             viewer and the file both get everything).
@@ -155,38 +155,41 @@ class RerunObserver:
         self._pending: collections.deque = collections.deque()
         self._traj: list[tuple[float, float]] = []
         self._gt: list[tuple[float, float] | None] = []
-        self._merges_seen = len(getattr(slam, "merges", ()) or ())
         self._merge_xy: list[tuple[float, float]] = []
         self._merge_labels: list[str] = []
         self._n = 0
-        self._timing0 = {m: slam.timings.count(m) for m in slam.timings.modules}
-        self._frame0 = int(getattr(slam, "frame_index", 0))
         self._offset = 0
         self._last_step: Any = None
+        if slam is not None:
+            self._start(slam)
+
+    def _start(self, slam: Any) -> None:
+        self.slam = slam
+        self._merges_seen = len(getattr(slam, "merges", ()) or ())
+        self._timing0 = {m: slam.timings.count(m) for m in slam.timings.modules}
+        self._frame0 = int(getattr(slam, "frame_index", 0))
 
     # ------------------------------------------------------------------ inputs
-    def frames(self, data: Any) -> _Observed:
+    def frames(self, data: Any) -> Any:
         """``data`` (a reader or an iterable of frames) with its frames passed through
         unchanged; each frame's image and ground truth are kept for its step's log.
         The result has ``frames()`` and, when ``data`` has one, ``len()``."""
-        return _Observed(data, self._pending)
+        observed = _Observed(data, self._pending)
+        return observed if hasattr(data, "__len__") else observed.frames()
 
     def attach(self, slam: Any, session: str = "") -> None:
         """Observe another run (the next session of a multisession mapping) on the same
         recording: its frames continue the ``frame`` timeline after the previous run's."""
         self.close(flush=False)
         self._offset += self._n
-        self.slam = slam
         self.session = session
         self._pending.clear()
         self._traj.clear()
         self._gt.clear()
-        self._merges_seen = len(getattr(slam, "merges", ()) or ())
         self._n = 0
-        self._timing0 = {m: slam.timings.count(m) for m in slam.timings.modules}
-        self._frame0 = int(getattr(slam, "frame_index", 0))
-        self._last_step = None
+        self._start(slam)
         if session:
+            self.rec.set_time("frame", sequence=self._offset)
             self.rec.log("events", self.rr.TextLog(f"session {session} starts", level="INFO"))
 
     # ------------------------------------------------------------------ per step

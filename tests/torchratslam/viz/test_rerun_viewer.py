@@ -28,21 +28,22 @@ N = 40
 
 
 def _read(path):
-    """``{entity: {column: [values in frame order]}}`` and each entity's frame numbers."""
+    """``{entity: {column: [values in frame order]}}`` (None where a row lacks a column)."""
     chunks = rr.chunk.RrdReader(str(path)).stream().to_chunks()
-    data: dict = {}
+    rows: dict = {}
     for c in chunks:
-        rb = c.to_record_batch()
-        if "frame" not in rb.schema.names:
+        cols = c.to_record_batch().to_pydict()
+        if "frame" not in cols:
             continue
-        ent = data.setdefault(c.entity_path.lstrip("/"), {})
-        cols = rb.to_pydict()
-        for name, values in cols.items():
-            ent.setdefault(name, []).extend(values)
-    for ent in data.values():  # sort every column by frame
-        order = np.argsort(np.asarray(ent["frame"]), kind="stable")
-        for name in ent:
-            ent[name] = [ent[name][i] for i in order]
+        n = len(cols["frame"])
+        rows.setdefault(c.entity_path.lstrip("/"), []).extend(
+            {k: v[i] for k, v in cols.items()} for i in range(n)
+        )
+    data = {}
+    for ent, rs in rows.items():
+        rs.sort(key=lambda r: r["frame"])
+        names = {k for r in rs for k in r}
+        data[ent] = {k: [r.get(k) for r in rs] for k in names}
     return data
 
 
@@ -125,3 +126,27 @@ def test_missing_extra_is_one_clear_error(monkeypatch):
     monkeypatch.setattr(builtins, "__import__", fake)
     with pytest.raises(ConfigError, match=r"torchratslam\[viewer\]"):
         rerun_viewer.import_rerun()
+
+
+def test_multisession_sessions_continue_one_timeline(tmp_path):
+    from torchratslam.config import load_config
+    from torchratslam.multisession.session import run_sessions
+    from torchratslam.readers.datasets import open_data
+    from torchratslam.viz.rerun_viewer import RerunObserver
+
+    cfg = tmp_path / "small.yaml"
+    cfg.write_text(SMALL)
+    rrd = tmp_path / "ms.rrd"
+    obs = RerunObserver(None, save=rrd)
+    sessions = [open_data(SIM), open_data(SIM)]
+    for k, s in enumerate(sessions):
+        s.name = f"s{k + 1}"
+    res = run_sessions(load_config(cfg), sessions, max_frames=20, observer=obs)
+    obs.close()
+    assert len(res["merges"]) == 1  # the second session starts on the first one's map
+    data = _read(rrd)
+    assert data["camera/image"]["frame"] == list(range(40))
+    texts = [t[0] for t in data["events"]["TextLog:text"]]
+    assert texts == ["session s1 starts", "session s2 starts", "s2 merge with map 0 at frame 0"]
+    assert data["events"]["frame"] == [0, 20, 20]
+    assert data["map/merges"]["frame"] == [20]
