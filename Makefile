@@ -6,7 +6,7 @@ STAMP   := $(VENV)/.installed
 TORCH   := torch==2.13.0
 OUT     ?= out
 
-.PHONY: all install demo test bench lint format clean
+.PHONY: all install demo test bench lint format clean docs
 
 all: test
 
@@ -30,6 +30,10 @@ test: $(STAMP)
 
 bench: $(STAMP)
 	$(BIN)/python -m benchmarks
+
+# The documentation site (mkdocs, strict: any broken reference fails) into $(OUT)/site.
+docs: $(STAMP)
+	NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs build --strict --site-dir $(OUT)/site
 
 lint: $(STAMP)
 	$(BIN)/ruff check .
