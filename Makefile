@@ -6,7 +6,7 @@ STAMP   := $(VENV)/.installed
 TORCH   := torch==2.13.0
 OUT     ?= out
 
-.PHONY: all install demo test bench lint format clean docs
+.PHONY: all install demo test bench lint format clean docs notebooks
 
 all: test
 
@@ -34,6 +34,10 @@ bench: $(STAMP)
 # The documentation site (mkdocs, strict: any broken reference fails) into $(OUT)/site.
 docs: $(STAMP)
 	NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs build --strict --site-dir $(OUT)/site
+
+# Execute every notebook in place (outputs kept, volatile metadata stripped).
+notebooks: $(STAMP)
+	$(BIN)/python notebooks/execute.py
 
 lint: $(STAMP)
 	$(BIN)/ruff check .
