@@ -15,24 +15,55 @@ averaging, optional normalisation) and compares it, by mean absolute difference 
 at every column offset, with every stored template. Below the threshold the view is
 *familiar* (template id, offset, relative angle); above it a new template is learnt.
 
-The frames here are synthetic 256x64 panoramas along a route (the generator of
-`benchmarks/bench_local_view.py`), so the notebook runs without a dataset.""",
+The frames here are synthetic 256x64 panoramas along a route (the generator of the
+local-view benchmark, defined below), so the notebook runs without a dataset.""",
     ),
     (
         "code",
         """import os
-import sys
 from pathlib import Path
 
 import matplotlib.pyplot as plt
 import numpy as np
 import torch
+import torch.nn.functional as F
 
-ROOT = Path.cwd().resolve().parent
-sys.path.insert(0, str(ROOT))
-from benchmarks.bench_local_view import Route
 from torchratslam.config import LocalViewParams
 from torchratslam.local_view.view import LocalView
+
+
+def smooth(x, sy, sx):
+    \"\"\"Gaussian blur of (N, Y, X): circular along X, replicated along Y.\"\"\"
+
+    def kernel(s):
+        r = int(3 * s) + 1
+        g = torch.exp(-(torch.arange(-r, r + 1, dtype=x.dtype) ** 2) / (2 * s * s))
+        return g / g.sum(), r
+
+    (gx, rx), (gy, ry) = kernel(sx), kernel(sy)
+    n, y, w = x.shape
+    x = torch.cat([x[..., -rx:], x, x[..., :rx]], -1)
+    x = F.conv1d(x.reshape(-1, 1, x.shape[-1]), gx[None, None]).reshape(n, y, w)
+    x = F.pad(x.transpose(1, 2).reshape(-1, 1, y), (ry, ry), mode="replicate")
+    return F.conv1d(x, gy[None, None]).reshape(n, w, y).transpose(1, 2)
+
+
+class Route:
+    \"\"\"Smooth random panoramas along a 1D route (the local-view benchmark's generator).\"\"\"
+
+    def __init__(self, length, y, x, *, knot=4.0, seed=0):
+        g = torch.Generator().manual_seed(seed)
+        self.knot = knot
+        base = smooth(torch.randn(int(length / knot) + 3, y, x, generator=g), y / 8, x / 32)
+        self.base = base / base.std() * 0.15
+        self.grad = torch.linspace(0.75, 0.3, y)[:, None]
+
+    def views(self, p):
+        p = torch.as_tensor(p, dtype=torch.float32)
+        j = (p / self.knot).floor().long()
+        a = (p / self.knot - j)[:, None, None]
+        return ((1 - a) * self.base[j] + a * self.base[j + 1] + self.grad).clamp(0, 1)
+
 
 params = LocalViewParams(
     template_x_size=64, template_y_size=16, vt_panoramic=True, vt_step_match=1,

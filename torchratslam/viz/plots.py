@@ -109,11 +109,19 @@ def plot_map(
     segs = _world_segments(world) if world is not None else None
     if segs is not None and have_gt:
         moved = segs @ rot.T + t
-        ax.add_collection(LineCollection(moved, colors="0.2", linewidths=1.5, zorder=0))
+        ax.add_collection(
+            LineCollection(moved, colors="0.2", linewidths=1.5, zorder=0, label="walls (aligned)")
+        )
     if e.size and p.size:
         ok = (e >= 0).all(1) & (e < p.shape[0]).all(1)
         ax.add_collection(
-            LineCollection(p[e[ok]][:, :, :2], colors="tab:blue", linewidths=0.8, zorder=2)
+            LineCollection(
+                p[e[ok]][:, :, :2],
+                colors="tab:blue",
+                linewidths=0.8,
+                zorder=2,
+                label=f"{int(ok.sum())} links",
+            )
         )
     if p.size:
         ax.scatter(p[:, 0], p[:, 1], s=6, color="tab:red", zorder=3, label=f"{len(p)} experiences")
@@ -160,8 +168,8 @@ def plot_pose_cells(
     )
     for ax, (img, xl, yl, name) in zip(axes, views):
         ax.imshow(img, origin="lower", cmap="viridis", aspect="auto")
-        ax.set_xlabel(xl)
-        ax.set_ylabel(yl)
+        ax.set_xlabel(f"{xl} (cells)")
+        ax.set_ylabel(f"{yl} (cells)")
         ax.set_title(name, fontsize=9)
     fig.suptitle(f"{title} (TH, Y, X) = {tuple(a.shape)}")
     return save_figure(fig, path)
