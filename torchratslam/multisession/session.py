@@ -267,6 +267,19 @@ PAPER_ICP_RMSE = {"virtual_tour": 0.00773327, "lab_tour": 0.00883269, "irat_like
 16; units as printed there)."""
 
 
+class _Sized:
+    """Frames with a known count (so the run's progress bar shows a total)."""
+
+    def __init__(self, frames: Iterable[Any], n: int) -> None:
+        self._frames, self._n = frames, n
+
+    def __iter__(self) -> Any:
+        return iter(self._frames)
+
+    def __len__(self) -> int:
+        return self._n
+
+
 def _shifted(frames: Iterable[Any], dt: float) -> Iterable[Any]:
     for f in frames:
         yield dataclasses.replace(f, t=float(f.t) + dt)
@@ -360,6 +373,12 @@ def run_sessions(
         frames = s.frames() if hasattr(s, "frames") else s
         if offsets is not None:
             frames = _shifted(frames, offsets[i])
+        if hasattr(s, "__len__"):  # the progress bar shows the session's total
+            frames = _Sized(frames, len(s))
+        if progress:
+            from tqdm import tqdm
+
+            tqdm.write(f"session {i + 1}/{len(sessions)}: {name}")
         if observer is not None:
             observer.attach(ms, name)
             frames = observer.frames(frames)
