@@ -192,7 +192,8 @@ def decode_image(msg: Any, msgtype: str, color: bool = False, topic: str = "imag
         raise
     except (ImageError, cv2.error, ValueError, TypeError) as exc:
         raise InputError(f"{topic}: image could not be decoded ({exc})") from None
-    return np.ascontiguousarray(img)
+    out = np.ascontiguousarray(img)
+    return out if out.flags.writeable else out.copy()  # a view of the message's bytes
 
 
 _decode_image = decode_image  # the name the readers used before the move
@@ -287,7 +288,7 @@ class BagReader(Reader):
                 if self.has_odometry:
                     conns = [c for c in reader.connections if c.topic == odom_topic]
                     for conn, ts, raw in reader.messages(connections=conns):
-                        msg = reader.deserialize(raw, conn.msgtype)
+                        msg: Any = reader.deserialize(raw, conn.msgtype)
                         t_odo.append(_stamp(msg, ts))
                         v.append(float(msg.twist.twist.linear.x))
                         w.append(float(msg.twist.twist.angular.z))
@@ -295,10 +296,10 @@ class BagReader(Reader):
                 if groundtruth_topic and groundtruth_topic in topics:
                     conns = [c for c in reader.connections if c.topic == groundtruth_topic]
                     for conn, ts, raw in reader.messages(connections=conns):
-                        msg = reader.deserialize(raw, conn.msgtype)
-                        p = msg.pose
+                        gmsg: Any = reader.deserialize(raw, conn.msgtype)
+                        p = gmsg.pose
                         gt.append(
-                            (_stamp(msg, ts), p.position.x, p.position.y, _yaw(p.orientation))
+                            (_stamp(gmsg, ts), p.position.x, p.position.y, _yaw(p.orientation))
                         )
         except InputError:
             raise
