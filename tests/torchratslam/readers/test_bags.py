@@ -210,6 +210,9 @@ def test_raw_encodings_decode_like_the_definitions():
             assert np.array_equal(decode_image(_msg(bgr, enc, pad), t, False), grey)
     assert np.array_equal(decode_image(_msg(bgr, "mono8", 3), t), grey)
     assert np.array_equal(decode_image(_msg(bgr, "mono16"), t), grey)  # v*257 -> v
+    ro = _msg(bgr, "mono8")
+    ro.data = bytes(ro.data)  # messages hold read-only bytes: the image must be writable
+    assert decode_image(ro, t).flags.writeable
     for enc in ("32FC1", "nv12", "weird"):
         m = _msg(bgr, "mono8")
         m.encoding = enc
