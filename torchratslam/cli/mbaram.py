@@ -107,6 +107,9 @@ def register(subparsers: Any) -> argparse.ArgumentParser:
         help="an MBARAM parameter over the preset, e.g. --set laser_scale=5 (repeatable)",
     )
     p.add_argument("--no-plots", action="store_true", help="skip the figures, e.g. --no-plots")
+    p.add_argument(
+        "--no-progress", action="store_true", help="no progress bars, e.g. --no-progress"
+    )
     p.set_defaults(func=main)
     return p
 
@@ -228,6 +231,20 @@ def plot_results(result: Any, session: Any, out: Path) -> None:
         plt.close(fig)
 
 
+def _with_progress(session: Any, ranges: Any, label: str, quiet: bool) -> list[Any]:
+    """One frame stream per lap, each with a labelled progress bar (lap k/N, frames)."""
+    laps = [laser_frames(session, a, b) for a, b in ranges]
+    if quiet:
+        return laps
+    from tqdm import tqdm
+
+    n = len(laps)
+    return [
+        tqdm(lap, total=int(b - a), desc=f"{label} {k}/{n}", unit="frame", leave=False)
+        for k, (lap, (a, b)) in enumerate(zip(laps, ranges), start=1)
+    ]
+
+
 def main(args: argparse.Namespace) -> int:
     """Run the subcommand."""
     import torch
@@ -254,8 +271,8 @@ def main(args: argparse.Namespace) -> int:
         raise InputError(f"{args.data}: the session has no lasers; add ?lasers=true")
     map_r, loc_r = split_laps(np.asarray(session.laps), args.laps, args.loc_laps)
     result = run_mbaram(
-        [laser_frames(session, a, b) for a, b in map_r],
-        [laser_frames(session, a, b) for a, b in loc_r],
+        _with_progress(session, map_r, "mapping lap", args.no_progress),
+        _with_progress(session, loc_r, "localisation lap", args.no_progress),
         params,
         odometry=args.odometry,
     )
