@@ -130,7 +130,7 @@ def test_missing_extra_is_one_clear_error(monkeypatch):
 
 def test_multisession_sessions_continue_one_timeline(tmp_path):
     from torchratslam.config import load_config
-    from torchratslam.multisession.session import run_sessions
+    from torchratslam.experiments.multisession_tour import run_sessions
     from torchratslam.readers.datasets import open_data
     from torchratslam.viz.rerun_viewer import RerunObserver
 
