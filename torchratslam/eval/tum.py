@@ -37,6 +37,7 @@ from typing import Any
 import numpy as np
 
 from torchratslam.graph.errors import InputError, MapFormatError
+from torchratslam.graph.geometry import wrap_angle
 from torchratslam.graph.messages import ActionKind
 
 __all__ = [
@@ -236,7 +237,7 @@ def frame_poses(
     ex, ey, eth = traj[:, 3], traj[:, 4], traj[:, 5]
     c, s = np.cos(eth), np.sin(eth)
     out = np.column_stack([ex + c * lx - s * ly, ey + s * lx + c * ly, eth + heading])
-    out[:, 2] = np.angle(np.exp(1j * out[:, 2]))
+    out[:, 2] = wrap_angle(out[:, 2], include_pi=True)
     return out
 
 
