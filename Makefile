@@ -9,7 +9,7 @@ OUT     ?= out
 # configs/), as symlinks, for mypy and lint-imports, which cannot follow package-dir.
 VIEW    := build/lint
 
-.PHONY: all install demo test bench lint lint-view format clean
+.PHONY: all install demo test bench lint lint-view format clean docs notebooks
 
 all: test
 
@@ -33,6 +33,14 @@ test: $(STAMP)
 
 bench: $(STAMP)
 	$(BIN)/python -m benchmarks
+
+# The documentation site (mkdocs, strict: any broken reference fails) into $(OUT)/site.
+docs: $(STAMP)
+	NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs build --strict --site-dir $(OUT)/site
+
+# Execute every notebook in place (outputs kept, volatile metadata stripped).
+notebooks: $(STAMP)
+	$(BIN)/python notebooks/execute.py
 
 lint-view:
 	rm -rf $(VIEW)

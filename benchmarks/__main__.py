@@ -6,6 +6,7 @@ import importlib
 import os
 import pkgutil
 import platform
+import sys
 import time
 from pathlib import Path
 
@@ -29,16 +30,18 @@ def main() -> None:
     only = {s.strip() for s in os.environ.get("BENCH_ONLY", "").split(",") if s.strip()}
     print(f"# torchratslam benchmarks\nmachine: {machine()}\n")
     here = Path(__file__).resolve().parent
-    for info in sorted(pkgutil.iter_modules([str(here)]), key=lambda m: m.name):
-        if not info.name.startswith("bench_"):
-            continue
-        if only and info.name.removeprefix("bench_") not in only:
-            continue
-        module = importlib.import_module(f"benchmarks.{info.name}")
+    names = [
+        m.name
+        for m in sorted(pkgutil.iter_modules([str(here)]), key=lambda m: m.name)
+        if m.name.startswith("bench_") and (not only or m.name.removeprefix("bench_") in only)
+    ]
+    for k, name in enumerate(names, start=1):
+        print(f"[benchmark {k}/{len(names)}] {name.removeprefix('bench_')}", file=sys.stderr)
+        module = importlib.import_module(f"benchmarks.{name}")
         t0 = time.perf_counter()
-        print(f"## {info.name.removeprefix('bench_')}\n", flush=True)
+        print(f"## {name.removeprefix('bench_')}\n", flush=True)
         module.main()
-        print(f"\n({info.name}: {time.perf_counter() - t0:.1f} s)\n", flush=True)
+        print(f"\n({name}: {time.perf_counter() - t0:.1f} s)\n", flush=True)
 
 
 if __name__ == "__main__":

@@ -76,6 +76,17 @@ class TimeLogger:
         with self._lock:
             return np.asarray(self._ms.get(module, []), dtype=np.float64)
 
+    def count(self, module: str) -> int:
+        """How many durations ``module`` has recorded."""
+        with self._lock:
+            return len(self._ms.get(module, ()))
+
+    def ms_at(self, module: str, index: int) -> float:
+        """The ``index``-th recorded duration of ``module`` (ms); NaN if not recorded."""
+        with self._lock:
+            values = self._ms.get(module, ())
+            return float(values[index]) if 0 <= index < len(values) else float("nan")
+
     def summary(self) -> dict[str, dict[str, Any]]:
         """Per module: ``count``, ``mean_ms``, ``median_ms``, ``max_ms``, ``total_s``.
 

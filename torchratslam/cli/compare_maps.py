@@ -36,19 +36,27 @@ def register(subparsers: Any) -> argparse.ArgumentParser:
         epilog=EPILOG,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    p.add_argument("a", metavar="A", help="the fixed map (e.g. the single-session map)")
-    p.add_argument("b", metavar="B", help="the moved map (e.g. the multisession map)")
+    p.add_argument("a", metavar="A", help="the fixed map (the single-session map), e.g. out/single")
+    p.add_argument(
+        "b", metavar="B", help="the moved map (the multisession map), e.g. out/multi/session2/state"
+    )
     p.add_argument(
         "--config",
-        help="config name or YAML (shapes the templates of a reference-format map)",
+        help="config name or YAML (shapes the templates of a reference-format map), "
+        "e.g. --config irat",
     )
     p.add_argument(
         "--groundtruth",
         metavar="CSV_OR_DATA",
-        help="ground truth: a CSV with t,x,y,theta columns or a dataset spec (sim:NAME, ...)",
+        help="ground truth: a CSV with t,x,y,theta columns or a dataset spec (sim:NAME, ...), "
+        "e.g. --groundtruth sim:virtual_tour",
     )
-    p.add_argument("--figure", metavar="PNG", help="write the overlay figure (Fig. 10) here")
-    p.add_argument("--json", action="store_true", help="print the numbers as JSON")
+    p.add_argument(
+        "--figure",
+        metavar="PNG",
+        help="write the overlay figure (Fig. 10) here, e.g. --figure fig10.png",
+    )
+    p.add_argument("--json", action="store_true", help="print the numbers as JSON, e.g. --json")
     p.set_defaults(func=main)
     return p
 

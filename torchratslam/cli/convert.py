@@ -32,14 +32,20 @@ def register(subparsers: Any) -> argparse.ArgumentParser:
         epilog=EPILOG,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    p.add_argument("source", metavar="SRC", help="the map to convert")
-    p.add_argument("target", metavar="DST", help="the directory to write")
-    p.add_argument("--to", required=True, choices=("native", "reference"), help="target format")
+    p.add_argument("source", metavar="SRC", help="the map to convert, e.g. out/vt/state")
+    p.add_argument("target", metavar="DST", help="the directory to write, e.g. their_format/")
+    p.add_argument(
+        "--to",
+        required=True,
+        choices=("native", "reference"),
+        help="target format, e.g. --to reference",
+    )
     p.add_argument(
         "--config",
-        help="config name or YAML the map was made with (shapes reference-format templates)",
+        help="config name or YAML the map was made with (shapes reference-format "
+        "templates), e.g. --config irat",
     )
-    p.add_argument("--json", action="store_true", help="print the report as JSON")
+    p.add_argument("--json", action="store_true", help="print the report as JSON, e.g. --json")
     p.set_defaults(func=main)
     return p
 

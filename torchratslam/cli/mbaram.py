@@ -17,6 +17,10 @@ from torchratslam.graph.errors import ConfigError
 # arguments and calls it.
 
 
+class _HelpFormatter(argparse.ArgumentDefaultsHelpFormatter, argparse.RawDescriptionHelpFormatter):
+    """Defaults shown, examples kept as written."""
+
+
 def register(subparsers: Any) -> argparse.ArgumentParser:
     """Add the ``mbaram`` subcommand."""
     p = subparsers.add_parser(
@@ -28,30 +32,54 @@ def register(subparsers: Any) -> argparse.ArgumentParser:
             "LOC_LAPS laps with and without the odometry channel. Writes OUT/metrics.json, "
             "OUT/map.png, OUT/nodes_per_lap.png, OUT/localisation.png and OUT/state.npz."
         ),
-        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
+        epilog="examples:\n"
+        "  torchratslam mbaram --data sim:irat_like --out out/mbaram\n"
+        "  torchratslam mbaram --data sim:lab_tour --out out/mb --laps 3 --loc-laps 2 "
+        "--odometry integrated",
+        formatter_class=_HelpFormatter,
     )
-    p.add_argument("--data", required=True, help="simulator spec sim:NAME[/SESSION][?key=value]")
-    p.add_argument("--out", required=True, type=Path, help="output directory")
-    p.add_argument("--laps", type=int, default=5, help="mapping laps")
-    p.add_argument("--loc-laps", type=int, default=5, help="localisation laps after the mapping")
-    p.add_argument("--seed", type=int, default=0, help="simulator seed")
     p.add_argument(
-        "--moving-obstacles", type=int, default=2, help="pedestrians walking along the path"
+        "--data",
+        required=True,
+        help="simulator spec sim:NAME[/SESSION][?key=value], e.g. --data sim:irat_like",
     )
-    p.add_argument("--moved-obstacles", type=int, default=2, help="boxes that move between laps")
+    p.add_argument(
+        "--out", required=True, type=Path, help="output directory, e.g. --out out/mbaram"
+    )
+    p.add_argument("--laps", type=int, default=5, help="mapping laps, e.g. --laps 3")
+    p.add_argument(
+        "--loc-laps",
+        type=int,
+        default=5,
+        help="localisation laps after the mapping, e.g. --loc-laps 2",
+    )
+    p.add_argument("--seed", type=int, default=0, help="simulator seed, e.g. --seed 1")
+    p.add_argument(
+        "--moving-obstacles",
+        type=int,
+        default=2,
+        help="pedestrians walking along the path, e.g. --moving-obstacles 0",
+    )
+    p.add_argument(
+        "--moved-obstacles",
+        type=int,
+        default=2,
+        help="boxes that move between laps, e.g. --moved-obstacles 0",
+    )
     p.add_argument(
         "--odometry",
         choices=("groundtruth", "integrated"),
         default="groundtruth",
         help="odometry channel: ground-truth pose (the paper assumes accurate odometry) "
-        "or dead reckoning of the noisy odometry",
+        "or dead reckoning of the noisy odometry, e.g. --odometry integrated",
     )
     p.add_argument(
         "--preset",
         choices=sorted(PRESETS),
         default="sim",
         help="parameter preset: paper (Table 3 as printed) or sim (paper values with laser "
-        "units and the odometry channel's S_MAX,k set for the simulated tours)",
+        "units and the odometry channel's S_MAX,k set for the simulated tours), "
+        "e.g. --preset paper",
     )
     p.add_argument(
         "--set",
@@ -60,7 +88,10 @@ def register(subparsers: Any) -> argparse.ArgumentParser:
         metavar="KEY=VALUE",
         help="an MBARAM parameter over the preset, e.g. --set laser_scale=5 (repeatable)",
     )
-    p.add_argument("--no-plots", action="store_true", help="skip the figures")
+    p.add_argument("--no-plots", action="store_true", help="skip the figures, e.g. --no-plots")
+    p.add_argument(
+        "--no-progress", action="store_true", help="no progress bars, e.g. --no-progress"
+    )
     p.set_defaults(func=main)
     return p
 
@@ -91,6 +122,7 @@ def main(args: argparse.Namespace) -> int:
         preset=args.preset,
         overrides=_parse_sets(args.set),
         plots=not args.no_plots,
+        progress=not args.no_progress,
     )
     print(summary_line(args.data, metrics, Path(args.out)))
     return 0

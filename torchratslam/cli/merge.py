@@ -2,7 +2,7 @@
 
 The partial map's current (last) template is matched against the loaded map's
 templates with the local view's matcher; if the best match is under
-``vt_match_threshold`` the maps are merged (:func:`torchratslam.maps.merge.merge_maps`) and the
+``vt_match_threshold`` the maps are merged (``torchratslam.maps.merge.merge_maps``) and the
 result is written to ``--out``, in the native format or the reference implementation's
 text format. Either input may be a native map, a run's OUT directory, or a
 reference-format directory.
@@ -25,23 +25,38 @@ def register(subparsers: Any) -> argparse.ArgumentParser:
     p = subparsers.add_parser(
         "merge",
         help="merge two saved maps offline (the partial map's last template must match)",
-        description=__doc__,
+        description=(__doc__ or "").replace("``", ""),
+        epilog="example:\n  torchratslam merge --config virtual_tour --loaded out/s1/state "
+        "--partial out/s2/state --out out/merged --relax",
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    p.add_argument("--config", required=True, help="config both maps were made with")
-    p.add_argument("--loaded", required=True, help="the stored map (its frame is kept)")
-    p.add_argument("--partial", required=True, help="the map to merge into it")
-    p.add_argument("--out", required=True, help="output directory for the merged map")
+    p.add_argument(
+        "--config",
+        required=True,
+        help="config both maps were made with, e.g. --config virtual_tour",
+    )
+    p.add_argument(
+        "--loaded",
+        required=True,
+        help="the stored map (its frame is kept), e.g. --loaded out/s1/state",
+    )
+    p.add_argument(
+        "--partial", required=True, help="the map to merge into it, e.g. --partial out/s2/state"
+    )
+    p.add_argument(
+        "--out", required=True, help="output directory for the merged map, e.g. --out out/merged"
+    )
     p.add_argument(
         "--format",
         choices=("native", "reference"),
         default="native",
-        help="output format (default: native)",
+        help="output format (default: native), e.g. --format reference",
     )
     p.add_argument(
         "--no-pc-shift",
         action="store_true",
-        help="skip the pose-cell association shift (the paper's Fig. 12 ablation)",
+        help="skip the pose-cell association shift (the paper's Fig. 12 ablation), "
+        "e.g. --no-pc-shift",
     )
     p.add_argument(
         "--exp-pc-shift",
@@ -61,7 +76,7 @@ def register(subparsers: Any) -> argparse.ArgumentParser:
     p.add_argument(
         "--relax",
         action="store_true",
-        help="relax the merged map once (exp_loops passes, exp_backend)",
+        help="relax the merged map once (exp_loops passes, exp_backend), e.g. --relax",
     )
     p.set_defaults(func=main)
     return p

@@ -26,20 +26,29 @@ def register(subparsers: Any) -> argparse.ArgumentParser:
     p = subparsers.add_parser(
         "multisession",
         help="map a simulated tour session by session, merging maps, vs single-session",
-        description=__doc__,
+        description=(__doc__ or "").replace("``", ""),
+        epilog="examples:\n"
+        "  torchratslam multisession --tour sim:virtual_tour --out out/ms --ablation\n"
+        "  torchratslam multisession --tour sim:irat_like --out out/irat --backends alpha,gtsam\n"
+        "  torchratslam multisession --tour sim:virtual_tour --out out/ms --rerun",
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     p.add_argument(
         "--config",
         default=None,
-        help="config file or shipped name (default: the tour's own config)",
+        help="config file or shipped name (default: the tour's own config), "
+        "e.g. --config virtual_tour",
     )
-    p.add_argument("--tour", required=True, help="sim:NAME (virtual_tour, lab_tour, irat_like)")
-    p.add_argument("--out", required=True, help="output directory")
+    p.add_argument(
+        "--tour",
+        required=True,
+        help="sim:NAME (virtual_tour, lab_tour, irat_like), e.g. --tour sim:lab_tour",
+    )
+    p.add_argument("--out", required=True, help="output directory, e.g. --out out/ms")
     p.add_argument(
         "--ablation",
         action="store_true",
-        help="also map without the pose-cell shift (the paper's Fig. 12)",
+        help="also map without the pose-cell shift (the paper's Fig. 12), e.g. --ablation",
     )
     p.add_argument(
         "--exp-pc-shift",
@@ -65,17 +74,31 @@ def register(subparsers: Any) -> argparse.ArgumentParser:
         action="append",
         default=[],
         metavar="KEY=VALUE",
-        help="override a config key (repeatable)",
+        help="override a config key (repeatable), e.g. --set exp_loops=50",
     )
-    p.add_argument("--seed", type=int, default=0, help="simulator seed (default 0)")
+    p.add_argument("--seed", type=int, default=0, help="simulator seed (default 0), e.g. --seed 2")
     p.add_argument(
         "--max-frames",
         type=int,
         default=None,
-        help="at most this many frames per session (quick checks)",
+        help="at most this many frames per session (quick checks), e.g. --max-frames 50",
     )
-    p.add_argument("--no-figures", action="store_true", help="write report.json only")
-    p.add_argument("--quiet", action="store_true", help="no progress bars")
+    p.add_argument(
+        "--no-figures", action="store_true", help="write report.json only, e.g. --no-figures"
+    )
+    p.add_argument("--quiet", action="store_true", help="no progress bars, e.g. --quiet")
+    p.add_argument(
+        "--rerun",
+        action="store_true",
+        help="watch the multisession mapping live in a rerun viewer (torchratslam[viewer]), "
+        "e.g. --rerun",
+    )
+    p.add_argument(
+        "--rerun-save",
+        metavar="FILE",
+        default=None,
+        help="record the multisession mapping for rerun into FILE.rrd, e.g. --rerun-save ms.rrd",
+    )
     p.set_defaults(func=main)
     return p
 
@@ -107,6 +130,8 @@ def main(args: argparse.Namespace) -> int:
             for k, v in (("exp_pc_shift", args.exp_pc_shift), ("match_exp", args.match_exp))
             if v != {"exp_pc_shift": "experiences", "match_exp": "first"}[k]
         },
+        rerun=args.rerun,
+        rerun_save=args.rerun_save,
     )
     print(report_markdown(result["report"]))
     print(f"wrote {Path(args.out) / 'report.json'}")

@@ -20,6 +20,8 @@ torchratslam.maps.state.load_state)."""
 EPILOG = """examples:
   torchratslam run --config configs/virtual_tour.yaml --data sim:virtual_tour --out out/vt
   torchratslam run --config irat --data irat_aus_28112011.bag --out out/irat --backend isam2
+  torchratslam run --config irat --data my_ros2_bag/ --image-topic /camera/image_raw \
+      --odom-topic /odom --out out/ros2 --tum
   torchratslam run --config lab_tour --data lab.mp4 --odometry lab_odometry.csv --out out/lab
   torchratslam run --config virtual_tour --data sim:virtual_tour/session2 --out out/s2 \\
       --load out/s1/state
@@ -46,7 +48,8 @@ def register(subparsers: Any) -> argparse.ArgumentParser:
         required=True,
         metavar="DATA",
         help="dataset: a directory (frames/, odometry.csv, groundtruth.csv), a video "
-        "(with --odometry), a ROS 1 .bag, or sim:NAME[/sessionK], e.g. --data sim:virtual_tour",
+        "(with --odometry), a ROS 1 .bag, a ROS 2 bag directory (sqlite3 or MCAP), or "
+        "sim:NAME[/sessionK], e.g. --data sim:virtual_tour",
     )
     p.add_argument(
         "--out",
@@ -107,7 +110,7 @@ def register(subparsers: Any) -> argparse.ArgumentParser:
         "--image-topic",
         default=None,
         metavar="TOPIC",
-        help="image topic of a .bag (CompressedImage or Image; default "
+        help="image topic of a ROS 1 or ROS 2 bag (CompressedImage or Image; default "
         "/<topic_root>/camera/image/compressed with the config's topic_root, else the "
         "iRat's /irat_red/camera/image/compressed), "
         "e.g. --image-topic /stlucia/camera/image/compressed",
@@ -116,7 +119,7 @@ def register(subparsers: Any) -> argparse.ArgumentParser:
         "--odom-topic",
         default=None,
         metavar="TOPIC",
-        help="nav_msgs/Odometry topic of a .bag (default /<topic_root>/odom, else "
+        help="nav_msgs/Odometry topic of a ROS 1 or ROS 2 bag (default /<topic_root>/odom, else "
         "/irat_red/odom), e.g. --odom-topic /irat_red/odom",
     )
     p.add_argument(
@@ -132,6 +135,26 @@ def register(subparsers: Any) -> argparse.ArgumentParser:
         metavar="N",
         help="torch intra-op threads (default 1: the per-frame work is small and extra "
         "threads mostly add overhead), e.g. --threads 4",
+    )
+    p.add_argument(
+        "--tum",
+        action="store_true",
+        help="also write TUM trajectories for evo: OUT/tum_experience.txt (the current "
+        "experience, as OpenRatSLAM publishes), OUT/tum_frame.txt (experience + odometry "
+        "since it) and OUT/tum_groundtruth.txt; then evo_ape tum OUT/tum_groundtruth.txt "
+        "OUT/tum_frame.txt -a, e.g. --tum",
+    )
+    p.add_argument(
+        "--rerun",
+        action="store_true",
+        help="watch the run live in a rerun viewer (needs torchratslam[viewer]), e.g. --rerun",
+    )
+    p.add_argument(
+        "--rerun-save",
+        metavar="FILE",
+        default=None,
+        help="record the run for the rerun viewer into FILE.rrd (open it with: rerun "
+        "FILE.rrd), e.g. --rerun-save out/run.rrd",
     )
     p.add_argument("--no-progress", action="store_true", help="no progress bar, e.g. --no-progress")
     p.add_argument(
@@ -185,6 +208,9 @@ def main(args: argparse.Namespace) -> int:
         progress=not args.no_progress,
         threads=args.threads,
         scale_report=args.scale_report,
+        tum=args.tum,
+        rerun=args.rerun,
+        rerun_save=args.rerun_save,
     )
     print(summary_line(metrics, Path(args.out)))
     return 0

@@ -30,14 +30,22 @@ def register(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
         description=HELP + ". Tours: " + ", ".join(TOURS) + ". Without --sessions the whole tour "
         "(sessions concatenated) is written to OUT; with it, one directory per session "
         "(OUT/session1, OUT/session2, ...).",
-        epilog="example: torchratslam simulate virtual_tour --out data/vt --sessions --seed 1 "
-        "--option illumination=0.2",
+        epilog="examples:\n"
+        "  torchratslam simulate virtual_tour --out data/vt --sessions --seed 1 "
+        "--option illumination=0.2\n"
+        "  torchratslam simulate loop --out data/loop --max-frames 200",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    p.add_argument("name", help="tour name (or sim:NAME[/SESSION][?k=v&...])")
-    p.add_argument("--out", required=True, help="output directory")
-    p.add_argument("--sessions", action="store_true", help="one dataset directory per session")
+    p.add_argument("name", help="tour name (or sim:NAME[/SESSION][?k=v&...]), e.g. virtual_tour")
+    p.add_argument("--out", required=True, help="output directory, e.g. --out data/vt")
     p.add_argument(
-        "--seed", type=int, default=None, help="seed of textures, noise and obstacles (0)"
+        "--sessions", action="store_true", help="one dataset directory per session, e.g. --sessions"
+    )
+    p.add_argument(
+        "--seed",
+        type=int,
+        default=None,
+        help="seed of textures, noise and obstacles (0), e.g. --seed 1",
     )
     p.add_argument(
         "--option",
@@ -46,13 +54,21 @@ def register(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
         type=_option,
         default=[],
         metavar="KEY=VALUE",
-        help="tour option, repeatable (e.g. lasers=1, moving_obstacles=4, exact_odometry=1)",
+        help="tour option, repeatable, e.g. -o lasers=1 (also moving_obstacles=4, "
+        "exact_odometry=1)",
     )
     p.add_argument(
-        "--max-frames", type=int, default=None, help="write at most this many frames per dataset"
+        "--max-frames",
+        type=int,
+        default=None,
+        help="write at most this many frames per dataset, e.g. --max-frames 200",
     )
-    p.add_argument("--overwrite", action="store_true", help="replace existing output directories")
-    p.add_argument("--quiet", action="store_true", help="no progress bars")
+    p.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="replace existing output directories, e.g. --overwrite",
+    )
+    p.add_argument("--quiet", action="store_true", help="no progress bars, e.g. --quiet")
     p.set_defaults(func=run)
     return p
 

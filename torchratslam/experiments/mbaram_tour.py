@@ -96,6 +96,20 @@ def split_laps(lap_ids: np.ndarray, laps: int, loc_laps: int) -> tuple[list, lis
     return ranges[:laps], ranges[laps:]
 
 
+def _with_progress(session: Any, ranges: Any, label: str, quiet: bool) -> list[Any]:
+    """One frame stream per lap, each with a labelled progress bar (lap k/N, frames)."""
+    laps = [laser_frames(session, a, b) for a, b in ranges]
+    if quiet:
+        return laps
+    from tqdm import tqdm
+
+    n = len(laps)
+    return [
+        tqdm(lap, total=int(b - a), desc=f"{label} {k}/{n}", unit="frame", leave=False)
+        for k, (lap, (a, b)) in enumerate(zip(laps, ranges), start=1)
+    ]
+
+
 def _check(data: str, laps: int, loc_laps: int) -> None:
     if laps < 1 or loc_laps < 0:
         raise ConfigError("--laps must be >= 1 and --loc-laps >= 0")
@@ -130,6 +144,7 @@ def run_experiment(
     preset: str = "sim",
     overrides: dict[str, str] | None = None,
     plots: bool = True,
+    progress: bool = False,
 ) -> tuple[Any, dict[str, Any]]:
     """Map ``laps`` laps of the simulated tour ``data``, localise on ``loc_laps`` more,
     and write OUT (``metrics.json``, ``state.npz``, and the figures when ``plots``).
@@ -139,13 +154,14 @@ def run_experiment(
         out: the output folder.
         odometry: ``groundtruth`` or ``integrated`` (the odometry channel's source).
         preset: a key of :data:`PRESETS`; ``overrides`` are MBARAM parameters over it.
+        progress: a labelled progress bar per lap (lap k/N, frames).
 
     Returns:
         The :func:`~torchratslam.mbaram.model.run_mbaram` result and the metrics written.
 
     Raises:
-        ConfigError: bad lap counts or parameters. InputError: not a simulated tour
-        with lasers.
+        ConfigError: bad lap counts or parameters.
+        InputError: not a simulated tour with lasers.
     """
     import torch
 
@@ -161,8 +177,8 @@ def run_experiment(
         raise InputError(f"{data}: the session has no lasers; add ?lasers=true")
     map_r, loc_r = split_laps(np.asarray(session.laps), laps, loc_laps)
     result = run_mbaram(
-        [laser_frames(session, a, b) for a, b in map_r],
-        [laser_frames(session, a, b) for a, b in loc_r],
+        _with_progress(session, map_r, "mapping lap", not progress),
+        _with_progress(session, loc_r, "localisation lap", not progress),
         params,
         odometry=odometry,
     )

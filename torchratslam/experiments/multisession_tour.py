@@ -58,6 +58,19 @@ def _shifted(frames: Iterable[Any], dt: float) -> Iterable[Any]:
         yield dataclasses.replace(f, t=float(f.t) + dt)
 
 
+class _Sized:
+    """Frames with a known count (so the run's progress bar shows a total)."""
+
+    def __init__(self, frames: Iterable[Any], n: int) -> None:
+        self._frames, self._n = frames, n
+
+    def __iter__(self) -> Any:
+        return iter(self._frames)
+
+    def __len__(self) -> int:
+        return self._n
+
+
 def _map_metrics(state: MapState, gt: np.ndarray | None) -> dict[str, Any]:
     """Counts and the experience ATE: every experience's final position against the
     ground truth at its creation time, after rigid SE(2) alignment."""
@@ -101,6 +114,7 @@ def run_sessions(
     save_dir: Any = None,
     progress: bool = False,
     max_frames: int | None = None,
+    observer: Any = None,
     **ratslam_kwargs: Any,
 ) -> dict[str, Any]:
     """Map ``sessions`` one after another, each starting with the maps the previous
@@ -115,6 +129,9 @@ def run_sessions(
         save_dir: where each session's map is saved (``<dir>/<session>/state``).
         progress: progress bars.
         max_frames: frames per session at most (for quick checks).
+        observer: a :class:`torchratslam.viz.rerun_viewer.RerunObserver` (or anything
+            with ``attach(slam, name)``, ``frames(data)`` and a call per step) that
+            watches every session.
 
     Returns:
         ``maps`` (the maps left, the last one the final), ``names``, ``merges`` (all
@@ -142,7 +159,16 @@ def run_sessions(
         frames = s.frames() if isinstance(s, FrameSource) else s
         if offsets is not None:
             frames = _shifted(frames, offsets[i])
-        res = ms.run(frames, max_frames=max_frames, progress=progress)
+        if hasattr(s, "__len__"):  # the progress bar shows the session's total
+            frames = _Sized(frames, len(s))
+        if progress:
+            from tqdm import tqdm
+
+            tqdm.write(f"session {i + 1}/{len(sessions)}: {name}")
+        if observer is not None:
+            observer.attach(ms, name)
+            frames = observer.frames(frames)
+        res = ms.run(frames, max_frames=max_frames, progress=progress, callback=observer)
         relax_s += float(res.timings.get("experience_map", {}).get("total_s", 0.0))
         state = ms.get_map()
         if save_dir is not None:
@@ -383,6 +409,7 @@ def run_tour(
     progress: bool = False,
     max_frames: int | None = None,
     merge_options: dict[str, Any] | None = None,
+    observer: Any = None,
     **ratslam_kwargs: Any,
 ) -> dict[str, Any]:
     """Multisession versus single-session mapping of a simulated tour.
@@ -407,6 +434,7 @@ def run_tour(
             concatenated runs get this many per session, the bridges included).
         merge_options: ``merge_maps`` options for every multisession run
             (``exp_pc_shift``, ``match_exp``; default: the authors' code).
+        observer: watches the multisession mapping's sessions (see :func:`run_sessions`).
 
     Returns:
         ``report`` (JSON-able: the keys of ``OUT/report.json``) and ``data`` (the maps,
@@ -428,7 +456,9 @@ def run_tour(
         ),
     }
     save = None if save_dir is None else Path(save_dir) / "multi"
-    multi = run_sessions(config, tour.sessions, offsets=clock.offsets, save_dir=save, **kw)
+    multi = run_sessions(
+        config, tour.sessions, offsets=clock.offsets, save_dir=save, observer=observer, **kw
+    )
     report, icps = _comparison(tour, clock, config, singles, multi)
     if merge_options:
         report["merge_options"] = dict(merge_options)
@@ -601,6 +631,8 @@ def run_experiment(
     progress: bool = False,
     overrides: dict[str, Any] | None = None,
     merge_options: dict[str, Any] | None = None,
+    rerun: bool = False,
+    rerun_save: str | Path | None = None,
 ) -> dict[str, Any]:
     """Run the experiment on a tour and write OUT (what the CLI and the demo call):
     ``report.json``, ``report.md``, the figures and the session maps.
@@ -612,6 +644,9 @@ def run_experiment(
         out: the output folder.
         overrides: flat config keys replaced last.
         merge_options: ``merge_maps`` options (default: the authors' code).
+        rerun: watch the multisession mapping live in a rerun viewer
+            (:class:`torchratslam.viz.rerun_viewer.RerunObserver`; extra ``viewer``).
+        rerun_save: record the multisession mapping for rerun into this ``.rrd`` file.
 
     Returns:
         :func:`run_tour`'s result (``report`` and ``data``).
@@ -629,16 +664,26 @@ def run_experiment(
     tour = get_tour(name, seed=seed)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    result = run_tour(
-        config,
-        tour,
-        ablation=ablation,
-        backends=tuple(backends),
-        save_dir=out,
-        progress=progress,
-        max_frames=max_frames,
-        merge_options=merge_options,
-    )
+    observer = None
+    if rerun or rerun_save:
+        from torchratslam.viz.rerun_viewer import RerunObserver
+
+        observer = RerunObserver(None, spawn=rerun, save=rerun_save)
+    try:
+        result = run_tour(
+            config,
+            tour,
+            ablation=ablation,
+            backends=tuple(backends),
+            save_dir=out,
+            progress=progress,
+            max_frames=max_frames,
+            merge_options=merge_options,
+            observer=observer,
+        )
+    finally:
+        if observer is not None:
+            observer.close()
     report = result["report"]
     report["seed"] = seed
     report["config"] = config.to_flat()

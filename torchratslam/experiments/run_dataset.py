@@ -211,6 +211,56 @@ def _output_dir(out: Path) -> Path:
     return out
 
 
+def _run_observed(
+    slam: Any,
+    data: Any,
+    max_frames: int | None,
+    progress: bool,
+    rerun: bool,
+    rerun_save: str | Path | None,
+    also: Any = None,
+) -> tuple[Any, Any]:
+    """Run ``slam`` over ``data``, recording every frame's pose estimate (for the TUM
+    files) and, when asked, logging every step to a rerun viewer and calling ``also``
+    with every step; returns the run's result and the recorder."""
+    from torchratslam.eval.tum import FramePoseRecorder
+
+    recorder = FramePoseRecorder()
+    frames: Any = data
+    observer = None
+    if rerun or rerun_save:
+        from torchratslam.viz.rerun_viewer import RerunObserver
+
+        observer = RerunObserver(slam, spawn=rerun, save=rerun_save)
+        frames = observer.frames(data)
+    hooks = [h for h in (recorder, observer, also) if h is not None]
+
+    def callback(r: Any) -> None:
+        for hook in hooks:
+            hook(r)
+
+    try:
+        result = slam.run(frames, max_frames=max_frames, progress=progress, callback=callback)
+    finally:
+        if observer is not None:
+            observer.close()
+    return result, recorder
+
+
+def _write_tum(slam: Any, out: Path, recorder: Any, data: Any) -> dict[str, Any]:
+    """The TUM files of ``--tum`` and the ATE of each estimate on them (for metrics.json)."""
+    from torchratslam.eval.tum import tum_ate, write_tum_files
+
+    table = data.groundtruth() if isinstance(data, GroundTruthSource) else None
+    files = write_tum_files(slam, out, recorder=recorder, groundtruth=table)
+    extra: dict[str, Any] = {"tum": {k: p.name for k, p in files.items()}}
+    if "groundtruth" in files and slam.trajectory().shape[0] >= 2:
+        for name in ("experience", "frame"):
+            if name in files:
+                extra[f"ate_{name}_rmse_m"] = tum_ate(files["groundtruth"], files[name])
+    return extra
+
+
 def run_dataset(
     config_spec: str,
     data_spec: str,
@@ -229,6 +279,9 @@ def run_dataset(
     progress: bool = True,
     threads: int = 1,
     scale_report: bool = False,
+    tum: bool = False,
+    rerun: bool = False,
+    rerun_save: str | Path | None = None,
 ) -> dict[str, Any]:
     """Map one dataset (localising in and merging with the ``load`` maps, if any) and
     write OUT; returns the metrics (what ``metrics.json`` holds).
@@ -249,6 +302,12 @@ def run_dataset(
         threads: torch intra-op threads.
         scale_report: record the cost per frame as the map grows (OUT/scale.json,
             scale.md, scale.png; :mod:`torchratslam.eval.scale`).
+        tum: also write TUM trajectories for evo (``tum_experience.txt``,
+            ``tum_frame.txt``, ``tum_groundtruth.txt``; :mod:`torchratslam.eval.tum`)
+            and the ATE of each estimate on them.
+        rerun: watch the run live in a rerun viewer
+            (:class:`torchratslam.viz.rerun_viewer.RerunObserver`; extra ``viewer``).
+        rerun_save: record the run for rerun into this ``.rrd`` file.
 
     Raises:
         InputError: bad counts, unreadable data, no frames, OUT not a directory.
@@ -287,27 +346,32 @@ def run_dataset(
         slam: Any = MultiSessionRatSLAM(config, [load_state(p) for p in load], **kwargs)
     else:
         slam = RatSLAM(config, **kwargs)
-    recorder = None
+    scale = None
     if scale_report:
         from torchratslam.eval.scale import ScaleRecorder
 
-        recorder = ScaleRecorder(links_of=lambda: slam.experience_map.num_links)
-    result = slam.run(
+        scale = ScaleRecorder(links_of=lambda: slam.experience_map.num_links)
+    result, recorder = _run_observed(
+        slam,
         data,
-        max_frames=max_frames,
-        progress=progress,
-        callback=None if recorder is None else recorder.on_step,
+        max_frames,
+        progress,
+        rerun,
+        rerun_save,
+        also=None if scale is None else scale.on_step,
     )
     if result.frames == 0:
         raise InputError(f"{data_spec}: no frames were read; check the dataset")
     extra: dict[str, Any] = {"data": str(data_spec), "config": str(config_spec)}
+    if tum:
+        extra.update(_write_tum(slam, out, recorder, data))
     if odometry is not None:
         extra["odometry"] = "visual"
     if load:
         extra["loaded"] = [str(p) for p in load]
     metrics = write_outputs(slam, out, result, data=data, extra=extra)
-    if recorder is not None:
-        metrics["scale"] = _write_scale_report(recorder, slam, out, str(data_spec))
+    if scale is not None:
+        metrics["scale"] = _write_scale_report(scale, slam, out, str(data_spec))
     return metrics
 
 
@@ -333,4 +397,13 @@ def summary_line(metrics: dict[str, Any], out: Path) -> str:
     if "ate_rmse_m" in metrics:
         ate = metrics["ate_rmse_m"]
         line += f", ATE {ate:.3f} m" if math.isfinite(ate) else ""
+        if "ate_frame_rmse_m" in metrics:
+            line += f" (per-frame pose {metrics['ate_frame_rmse_m']:.3f} m)"
+        dr = metrics.get("dead_reckoning_ate_m")
+        if dr is not None and math.isfinite(dr):
+            line += f" vs dead reckoning {dr:.3f} m"
+    if "loaded" in metrics:  # a multisession run
+        merges = metrics.get("merges")
+        n_merges = len(merges) if isinstance(merges, (list, dict)) else 0
+        line += f", {n_merges} merge{'s' if n_merges != 1 else ''}"
     return f"{line}; wrote {out}"

@@ -1,9 +1,9 @@
-"""Readers: datasets (image folders, videos, ROS bags, CSV odometry) and visual odometry."""
+"""Readers: datasets (image folders, videos, ROS 1/2 bags, CSV odometry) and visual odometry."""
 
+from torchratslam.readers.bags import BagReader
 from torchratslam.readers.datasets import (
     IMAGE_EXTENSIONS,
     VIDEO_EXTENSIONS,
-    BagReader,
     DirectoryReader,
     Reader,
     VideoReader,

@@ -14,16 +14,9 @@ visual odometry). Frames are read lazily, one at a time.
 * :class:`VideoReader` -- a video file plus an optional odometry CSV (same format,
   one row per video frame); without it, timestamps come from the video's frame rate
   and the pipeline uses visual odometry.
-* :class:`BagReader` -- a ROS 1 bag read with ``rosbags`` (no ROS install):
-  ``sensor_msgs/CompressedImage`` or ``sensor_msgs/Image`` and ``nav_msgs/Odometry``
-  (``twist.twist.linear.x``, ``twist.twist.angular.z``), optional
-  ``geometry_msgs/PoseStamped`` ground truth. Defaults are the iRat 2011 bag's topics.
-  Unlike the ROS node, every message is used, in header-stamp order, so results do
-  not depend on playback speed. The odometry between two images is the exact
-  integral of the odometry messages' piecewise-constant velocities over that
-  interval, divided by its length (OpenRatSLAM instead feeds each odometry message to
-  the pose cells as it arrives; the distance travelled is the same).
-* :func:`open_data` -- dispatch on a spec: a directory, a video, a ``.bag``, or
+* :class:`~torchratslam.readers.bags.BagReader` -- a ROS 1 or ROS 2 (sqlite3, MCAP)
+  bag, in :mod:`torchratslam.readers.bags`.
+* :func:`open_data` -- dispatch on a spec: a directory, a video, a ROS bag, or
   ``sim:NAME`` / ``sim:NAME/sessionK`` (the simulator).
 
 Errors (missing files, unreadable images, mismatched counts, non-monotonic or NaN
@@ -35,10 +28,9 @@ from __future__ import annotations
 import csv
 import json
 import logging
-import math
 from collections.abc import Iterator
 from pathlib import Path
-from typing import Any, cast
+from typing import Any
 
 import cv2
 import numpy as np
@@ -50,7 +42,6 @@ from torchratslam.messages import Frame
 __all__ = [
     "IMAGE_EXTENSIONS",
     "VIDEO_EXTENSIONS",
-    "BagReader",
     "DirectoryReader",
     "Reader",
     "VideoReader",
@@ -354,200 +345,17 @@ class VideoReader(Reader):
         )
 
 
-# ----------------------------------------------------------------------------- ROS 1 bag
-def _stamp(msg: Any, fallback_ns: int) -> float:
-    header = getattr(msg, "header", None)
-    if header is not None:
-        s = header.stamp
-        t = float(s.sec) + float(s.nanosec) * 1e-9
-        if t > 0:
-            return t
-    return fallback_ns * 1e-9
+# ----------------------------------------------------------------------------- ROS bags
+_BAG_NAMES = ("BagReader", "_decode_image", "_interval_means", "_stamp", "_yaw")
 
 
-def _decode_image(msg: Any, msgtype: str, color: bool, topic: str) -> np.ndarray:
-    if msgtype.endswith("CompressedImage"):
-        buf = np.frombuffer(bytes(msg.data), dtype=np.uint8)
-        img = cv2.imdecode(buf, cv2.IMREAD_COLOR if color else cv2.IMREAD_GRAYSCALE)
-        if img is None:
-            raise InputError(f"{topic}: a CompressedImage ({msg.format!r}) could not be decoded")
-        return img
-    enc = str(msg.encoding).lower()
-    h, w, step = int(msg.height), int(msg.width), int(msg.step)
-    data = np.frombuffer(bytes(msg.data), dtype=np.uint8)
-    channels = {"mono8": 1, "8uc1": 1, "bgr8": 3, "rgb8": 3, "8uc3": 3, "bgra8": 4, "rgba8": 4}
-    if enc not in channels:
-        raise InputError(
-            f"{topic}: image encoding {msg.encoding!r} is not supported (use mono8/bgr8/rgb8)"
-        )
-    c = channels[enc]
-    if data.size < h * step or step < w * c:
-        raise InputError(
-            f"{topic}: image data is shorter than height*step ({data.size} < {h * step})"
-        )
-    img = (
-        data[: h * step].reshape(h, step)[:, : w * c].reshape(h, w, c)
-        if c > 1
-        else data[: h * step].reshape(h, step)[:, :w]
-    )
-    if c > 1:
-        code = {
-            "rgb8": cv2.COLOR_RGB2BGR,
-            "rgba8": cv2.COLOR_RGBA2BGR,
-            "bgra8": cv2.COLOR_BGRA2BGR,
-        }.get(enc)
-        img = cv2.cvtColor(img, code) if code is not None else img
-        if not color:
-            img = cv2.cvtColor(np.ascontiguousarray(img), cv2.COLOR_BGR2GRAY)
-    return np.ascontiguousarray(img)
+def __getattr__(name: str) -> Any:
+    """The bag reader moved to :mod:`torchratslam.readers.bags` (which imports this module)."""
+    if name in _BAG_NAMES:
+        from torchratslam.readers import bags
 
-
-def _yaw(q: Any) -> float:
-    return math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
-
-
-def _interval_means(t_img: np.ndarray, t_odo: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """Mean of the piecewise-constant velocity (value v_i on (t_{i-1}, t_i]) over each
-    image interval (t_img[k-1], t_img[k]]; 0 for the first image."""
-    if t_odo.size == 0:
-        return np.zeros_like(t_img)
-    seg = np.diff(t_odo) * v[1:]  # integral over (t_{i-1}, t_i]
-    cum = np.concatenate([[0.0], np.cumsum(seg)])  # integral from t_odo[0] to t_odo[i]
-    integral = np.interp(t_img, t_odo, cum)  # exact for piecewise-constant v (linear cum)
-    # beyond the last message: hold the last velocity
-    after = t_img > t_odo[-1]
-    integral[after] = cum[-1] + (t_img[after] - t_odo[-1]) * v[-1]
-    out = np.zeros_like(t_img)
-    dt = np.diff(t_img)
-    out[1:] = np.where(dt > 0, np.diff(integral) / np.where(dt > 0, dt, 1.0), 0.0)
-    return out
-
-
-class BagReader(Reader):
-    """A ROS 1 bag (read with ``rosbags``; no ROS install needed).
-
-    Args:
-        path: the ``.bag`` file.
-        image_topic: ``sensor_msgs/CompressedImage`` or ``sensor_msgs/Image`` topic.
-        odom_topic: ``nav_msgs/Odometry`` topic; None or absent from the bag: no
-            odometry (``has_odometry`` False; use visual odometry).
-        groundtruth_topic: optional ``geometry_msgs/PoseStamped`` topic (the iRat's
-            overhead camera); ignored when absent from the bag.
-        color: decode images as BGR (default: grey).
-    """
-
-    def __init__(
-        self,
-        path: str | Path,
-        *,
-        image_topic: str = IRAT_IMAGE_TOPIC,
-        odom_topic: str | None = IRAT_ODOM_TOPIC,
-        groundtruth_topic: str | None = IRAT_GROUNDTRUTH_TOPIC,
-        color: bool = False,
-    ) -> None:
-        from rosbags.highlevel import AnyReader
-        from rosbags.typesys import Stores, get_typestore
-
-        self.path = Path(path)
-        self.name = self.path.stem
-        if not self.path.is_file():
-            raise InputError(f"{self.path}: bag file not found")
-        self.image_topic, self.odom_topic, self.color = image_topic, odom_topic, color
-        self._typestore = get_typestore(Stores.ROS1_NOETIC)
-        self._AnyReader = AnyReader
-        try:
-            with AnyReader([self.path], default_typestore=self._typestore) as reader:
-                topics = {c.topic: c for c in reader.connections}
-                if image_topic not in topics:
-                    raise InputError(
-                        f"{self.path}: no image topic {image_topic!r} "
-                        f"(topics: {', '.join(sorted(topics))}); pass --image-topic"
-                    )
-                self._count = sum(c.msgcount for c in reader.connections if c.topic == image_topic)
-                # header stamps of the images (deserialising is needed for the stamps)
-                self._t_img = self._image_stamps(reader)
-                t_odo, v, w = [], [], []
-                self.has_odometry = odom_topic is not None and odom_topic in topics
-                if self.has_odometry:
-                    conns = [c for c in reader.connections if c.topic == odom_topic]
-                    for conn, ts, raw in reader.messages(connections=conns):
-                        msg: Any = reader.deserialize(raw, conn.msgtype)
-                        t_odo.append(_stamp(msg, ts))
-                        v.append(float(msg.twist.twist.linear.x))
-                        w.append(float(msg.twist.twist.angular.z))
-                gt = []
-                if groundtruth_topic and groundtruth_topic in topics:
-                    conns = [c for c in reader.connections if c.topic == groundtruth_topic]
-                    for conn, ts, raw in reader.messages(connections=conns):
-                        msg = reader.deserialize(raw, conn.msgtype)
-                        p = cast(Any, msg).pose
-                        gt.append(
-                            (_stamp(msg, ts), p.position.x, p.position.y, _yaw(p.orientation))
-                        )
-        except InputError:
-            raise
-        except Exception as exc:  # rosbags raises its own hierarchy
-            raise InputError(f"{self.path}: cannot be read as a ROS 1 bag ({exc})") from None
-        self._order = np.argsort(self._t_img, kind="stable")
-        t_img = self._t_img[self._order]
-        if not np.all(np.isfinite(t_img)):
-            raise InputError(f"{self.path}: image timestamps contain NaN")
-        if t_img.size > 1 and np.any(np.diff(t_img) <= 0):
-            raise InputError(f"{self.path}: duplicate image timestamps on {image_topic}")
-        self.t = t_img
-        if self.has_odometry:
-            o = np.argsort(np.asarray(t_odo), kind="stable")
-            t_o, v_o, w_o = np.asarray(t_odo)[o], np.asarray(v)[o], np.asarray(w)[o]
-            if not (
-                np.all(np.isfinite(t_o)) and np.all(np.isfinite(v_o)) and np.all(np.isfinite(w_o))
-            ):
-                raise InputError(f"{self.path}: NaN in the odometry on {odom_topic}")
-            self.vtrans = _interval_means(t_img, t_o, v_o)
-            self.vrot = _interval_means(t_img, t_o, w_o)
-        else:
-            log.info(
-                "%s: no odometry topic %r; the frames carry no odometry", self.path, odom_topic
-            )
-            self.vtrans = np.zeros_like(t_img)
-            self.vrot = np.zeros_like(t_img)
-        self._gt = np.asarray(sorted(gt), dtype=np.float64) if gt else None
-
-    def _image_stamps(self, reader: Any) -> np.ndarray:
-        conns = [c for c in reader.connections if c.topic == self.image_topic]
-        stamps = []
-        for conn, ts, raw in reader.messages(connections=conns):
-            stamps.append(_stamp(reader.deserialize(raw, conn.msgtype), ts))
-        return np.asarray(stamps, dtype=np.float64)
-
-    def __len__(self) -> int:
-        return int(self.t.shape[0])
-
-    def groundtruth(self) -> np.ndarray | None:
-        return None if self._gt is None else self._gt.copy()
-
-    def _images(self) -> Iterator[np.ndarray]:
-        with self._AnyReader([self.path], default_typestore=self._typestore) as reader:
-            conns = [c for c in reader.connections if c.topic == self.image_topic]
-            if np.all(np.diff(self._order) == 1):  # already in stamp order: stream
-                for conn, _, raw in reader.messages(connections=conns):
-                    yield _decode_image(
-                        reader.deserialize(raw, conn.msgtype),
-                        conn.msgtype,
-                        self.color,
-                        self.image_topic,
-                    )
-                return
-            raws = [(conn.msgtype, raw) for conn, _, raw in reader.messages(connections=conns)]
-        for i in self._order:
-            msgtype, raw = raws[i]
-            yield _decode_image(
-                reader.deserialize(raw, msgtype), msgtype, self.color, self.image_topic
-            )
-
-    def frames(self) -> Iterator[Frame]:
-        return _frames_from_arrays(
-            self._images(), self.t, self.vtrans, self.vrot, self._gt, str(self.path)
-        )
+        return getattr(bags, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 # ----------------------------------------------------------------------------- dispatch
@@ -563,7 +371,8 @@ def open_data(
     """Open a dataset from a spec.
 
     Args:
-        spec: a dataset directory, a video file, a ``.bag`` file, or ``sim:NAME`` /
+        spec: a dataset directory, a video file, a ROS 1 ``.bag`` file, a ROS 2 bag
+            directory (or its ``.db3`` / ``.mcap`` file), or ``sim:NAME`` /
             ``sim:NAME/sessionK`` (the simulator's tours).
         odometry: an odometry CSV (for a video, or to replace a directory's).
         groundtruth: a ground-truth CSV for a video.
@@ -585,16 +394,18 @@ def open_data(
     p = Path(s)
     if not p.exists():
         raise InputError(
-            f"data {s!r} not found; give a dataset directory, a video, a .bag file, or sim:NAME"
+            f"data {s!r} not found; give a dataset directory, a video, a ROS bag, or sim:NAME"
         )
+    from torchratslam.readers.bags import BagReader, is_bag
+
+    if is_bag(p):
+        return BagReader(p, image_topic=image_topic, odom_topic=odom_topic, color=color)
     if p.is_dir():
         return DirectoryReader(p, odometry=odometry, color=color)
     suffix = p.suffix.lower()
-    if suffix == ".bag":
-        return BagReader(p, image_topic=image_topic, odom_topic=odom_topic, color=color)
     if suffix in VIDEO_EXTENSIONS:
         return VideoReader(p, odometry=odometry, groundtruth=groundtruth, color=color)
     raise InputError(
         f"data {s!r}: unknown kind (expected a directory, a video {', '.join(VIDEO_EXTENSIONS)}, "
-        "a .bag file, or sim:NAME)"
+        "a ROS 1 .bag, a ROS 2 bag directory, or sim:NAME)"
     )

@@ -110,7 +110,9 @@ def plot_map(
     segs = _world_segments(world) if world is not None else None
     if segs is not None and have_gt:
         moved = segs @ rot.T + t
-        ax.add_collection(LineCollection(moved, colors="0.2", linewidths=1.5, zorder=0))
+        ax.add_collection(
+            LineCollection(moved, colors="0.2", linewidths=1.5, zorder=0, label="walls (aligned)")
+        )
     if e.size and p.size:
         ok = (e >= 0).all(1) & (e < p.shape[0]).all(1)
         ax.add_collection(
@@ -119,6 +121,7 @@ def plot_map(
                 colors="tab:blue",
                 linewidths=0.8,
                 zorder=2,
+                label=f"{int(ok.sum())} links",
             )
         )
     if p.size:
@@ -166,8 +169,8 @@ def plot_pose_cells(
     )
     for ax, (img, xl, yl, name) in zip(axes, views):
         ax.imshow(img, origin="lower", cmap="viridis", aspect="auto")
-        ax.set_xlabel(xl)
-        ax.set_ylabel(yl)
+        ax.set_xlabel(f"{xl} (cells)")
+        ax.set_ylabel(f"{yl} (cells)")
         ax.set_title(name, fontsize=9)
     fig.suptitle(f"{title} (TH, Y, X) = {tuple(a.shape)}")
     return save_figure(fig, path)

@@ -126,7 +126,7 @@ def plot_activity(
     ax.bar(np.arange(n_th), th, width=1.0, color="tab:blue")
     ax.set(
         xlabel="theta (cells)",
-        ylabel="activity",
+        ylabel="activity (summed, arbitrary units)",
         title="theta activity (summed over x, y)",
         xlim=(-0.5, n_th - 0.5),
     )
@@ -136,7 +136,9 @@ def plot_activity(
         steps = np.arange(len(c), dtype=np.float64)
         for piece in split_at_wraps(np.stack([steps, c[:, 2]], axis=1), (10**9, n_th)):
             ax.plot(piece[:, 0], piece[:, 1], color="tab:orange")
-        ax.set(xlabel="step", ylabel="theta (cells)", title="packet heading", ylim=(0, n_th))
+        ax.set(
+            xlabel="step (frames)", ylabel="theta (cells)", title="packet heading", ylim=(0, n_th)
+        )
     fig.suptitle(title)
     fig.tight_layout()
     if path is None:

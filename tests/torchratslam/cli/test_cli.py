@@ -204,3 +204,19 @@ def test_commands_default_to_one_torch_thread_and_reject_bad_thread_counts(monke
     monkeypatch.setenv("TORCHRATSLAM_THREADS", "lots")
     assert main(["simulate", "loop", "--out", "/nonexistent/x"]) == 2
     assert "TORCHRATSLAM_THREADS" in capsys.readouterr().err
+
+
+def test_every_subcommand_help_has_examples_and_no_sphinx_markup():
+    import re
+
+    parser = build_parser()
+    names = [n for a in parser._subparsers._group_actions for n in a.choices]
+    assert {"run", "multisession", "mbaram", "merge", "simulate", "compare-backends"} <= set(names)
+    for name in names:
+        sub = _subparser(name)
+        text = sub.format_help()
+        assert re.search(r"^examples?:\n  torchratslam " + name, text, re.M), name
+        assert not re.search(r":(class|func|meth|mod|attr|data|exc):`|``", text), name
+        for action in sub._actions:
+            if action.dest != "help":
+                assert action.help and "e.g." in action.help, (name, action.option_strings)

@@ -1,0 +1,179 @@
+"""TUM trajectories: lossless files, evo's ATE equals the project's, and the per-frame
+pose equals the experience map's own accumulators."""
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from torchratslam.graph.errors import InputError, MapFormatError
+
+from torchratslam.cli import main
+from torchratslam.config import load_config
+from torchratslam.eval.tum import (
+    FramePoseRecorder,
+    frame_poses,
+    read_tum,
+    tum_ate,
+    write_tum,
+)
+from torchratslam.pipeline import RatSLAM
+from torchratslam.readers.datasets import open_data
+
+SMALL = """\
+template_x_size: 32
+template_y_size: 8
+vt_panoramic: 1
+vt_step_match: 1
+vt_match_threshold: 0.06
+pc_dim_xy: 15
+pc_dim_th: 18
+pc_cell_x_size: 0.5
+pc_vt_inject_energy: 0.1
+exp_loops: 5
+"""
+SIM = "sim:loop?laps=2&frames=120"
+
+
+def test_write_read_round_trip_is_lossless(tmp_path):
+    rng = np.random.default_rng(0)
+    t = np.cumsum(rng.uniform(0.05, 0.2, 50)) + 1.3e9
+    poses = np.column_stack([rng.normal(size=(50, 2)) * 10, rng.uniform(-np.pi, np.pi, 50)])
+    poses[3] = np.nan  # skipped
+    write_tum(tmp_path / "a.txt", t, poses, comment="test")
+    tt, pp = read_tum(tmp_path / "a.txt")
+    keep = np.ones(50, bool)
+    keep[3] = False
+    np.testing.assert_array_equal(tt, t[keep])
+    np.testing.assert_array_equal(pp[:, :2], poses[keep, :2])
+    np.testing.assert_allclose(pp[:, 2], poses[keep, 2], atol=1e-12)
+    lines = (tmp_path / "a.txt").read_text().splitlines()
+    assert lines[0] == "# test" and lines[1].startswith("# timestamp")
+    assert all(len(s.split()) == 8 for s in lines[2:])
+    (tmp_path / "bad.txt").write_text("1 2 3\n")
+    with pytest.raises(MapFormatError, match="line 1"):
+        read_tum(tmp_path / "bad.txt")
+
+
+def test_tum_ate_associates_by_timestamp(tmp_path):
+    # the estimate covers every other ground-truth stamp, 1 ms late; a rigid motion apart
+    t = np.arange(40) * 0.1
+    gt = np.column_stack([np.cos(t), np.sin(2 * t), t])
+    c, s = np.cos(0.7), np.sin(0.7)
+    est = gt.copy()
+    est[:, :2] = gt[:, :2] @ np.array([[c, -s], [s, c]]).T + [3.0, -1.0]
+    est[::3, 0] += 0.05  # an error the alignment cannot remove
+    write_tum(tmp_path / "gt.txt", t, gt)
+    write_tum(tmp_path / "est.txt", t[::2] + 0.001, est[::2])
+    # brute force: align the matched pairs by searching the rotation finely
+    g, e = gt[::2, :2], est[::2, :2]
+    best = np.inf
+    for a in np.linspace(-np.pi, np.pi, 20001):
+        r = np.array([[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]])
+        m = e @ r.T
+        m += (g - m).mean(axis=0)
+        best = min(best, float(np.sqrt(np.mean(np.sum((m - g) ** 2, axis=1)))))
+    assert tum_ate(tmp_path / "gt.txt", tmp_path / "est.txt") == pytest.approx(best, abs=1e-6)
+    assert best > 0.005
+    with pytest.raises(InputError, match="match"):
+        tum_ate(tmp_path / "gt.txt", tmp_path / "est.txt", max_diff=1e-4)
+
+
+def test_frame_pose_equals_the_experience_maps_accumulators(tmp_path):
+    # without relaxation the experiences never move, so the per-frame pose must be the
+    # pose at which the map would create an experience: current + accumulated odometry
+    cfg_path = tmp_path / "small.yaml"
+    cfg_path.write_text(SMALL.replace("exp_loops: 5", "exp_loops: 0"))
+    slam = RatSLAM(load_config(cfg_path))
+    rec = FramePoseRecorder()
+    live, kinds = [], []
+
+    def cb(r):
+        rec(r)
+        em = slam.experience_map
+        p = np.asarray(em.poses)[em.current_id]
+        live.append((p[0] + em.accum_x, p[1] + em.accum_y, em.accum_facing))
+        kinds.append((int(r.action.kind), r.action.relative_rad))
+
+    slam.run(open_data(SIM), progress=False, callback=cb)
+    got = rec.poses(slam)
+    live = np.asarray(live)
+    d = got - live
+    d[:, 2] = np.angle(np.exp(1j * d[:, 2]))
+    assert np.abs(d).max() < 1e-9
+    assert any(k == 2 and r != 0 for k, r in kinds)  # a LINK with a view offset was checked
+    assert not all(rec.reset)  # and frames that accumulate odometry
+
+
+def test_frame_poses_hand_example():
+    # one experience at (1, 2, pi/2); then two frames of 1 m forward, a 90 degree turn
+    traj = np.array([[0, 0, 0, 1, 2, np.pi / 2]] * 3, dtype=float)
+    odo = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 1.0], [1.0, np.pi / 2, 1.0]])
+    out = frame_poses(traj, odo, np.array([True, False, False]), np.zeros(3))
+    np.testing.assert_allclose(out[0], [1, 2, np.pi / 2], atol=1e-12)
+    np.testing.assert_allclose(out[1], [1, 3, np.pi / 2], atol=1e-12)
+    np.testing.assert_allclose(out[2], [0, 3, np.pi], atol=1e-12)
+    with pytest.raises(InputError, match="one row per frame"):
+        frame_poses(traj, odo[:2], np.ones(3, bool), np.zeros(3))
+
+
+@pytest.fixture(scope="module")
+def tum_run(tmp_path_factory):
+    root = tmp_path_factory.mktemp("tum")
+    cfg = root / "small.yaml"
+    cfg.write_text(SMALL)
+    out = root / "out"
+    args = ["run", "--config", str(cfg), "--data", SIM, "--out", str(out), "--no-progress"]
+    assert main([*args, "--tum"]) == 0
+    return out
+
+
+def _evo_ate(gt: Path, est: Path) -> float:
+    from evo.core import metrics, sync
+    from evo.tools import file_interface
+
+    ref = file_interface.read_tum_trajectory_file(str(gt))
+    e = file_interface.read_tum_trajectory_file(str(est))
+    ref, e = sync.associate_trajectories(ref, e, max_diff=0.01)
+    e.align(ref, correct_scale=False)
+    ape = metrics.APE(metrics.PoseRelation.translation_part)
+    ape.process_data((ref, e))
+    return float(ape.get_statistic(metrics.StatisticsType.rmse))
+
+
+def test_evo_ate_equals_the_projects(tum_run):
+    out = tum_run
+    m = json.loads((out / "metrics.json").read_text())
+    assert m["tum"] == {
+        "experience": "tum_experience.txt",
+        "frame": "tum_frame.txt",
+        "groundtruth": "tum_groundtruth.txt",
+    }
+    gt = out / "tum_groundtruth.txt"
+    for name in ("experience", "frame"):
+        est = out / f"tum_{name}.txt"
+        ours = tum_ate(gt, est)
+        assert ours == pytest.approx(_evo_ate(gt, est), abs=1e-6)
+        assert m[f"ate_{name}_rmse_m"] == ours
+    # the experience estimate is the run's trajectory: same ATE as metrics.json's
+    assert m["ate_experience_rmse_m"] == pytest.approx(m["ate_rmse_m"], abs=1e-9)
+    assert m["ate_frame_rmse_m"] != m["ate_experience_rmse_m"]
+
+
+def test_evo_ape_command_reads_the_files(tum_run):
+    evo_ape = Path(sys.executable).parent / "evo_ape"
+    if not evo_ape.exists():
+        pytest.skip("evo_ape script not on this interpreter's path")
+    gt, est = tum_run / "tum_groundtruth.txt", tum_run / "tum_frame.txt"
+    res = subprocess.run(
+        [str(evo_ape), "tum", str(gt), str(est), "-a"],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert res.returncode == 0, res.stderr
+    lines = res.stdout.splitlines()
+    rmse = next(float(s.split()[1]) for s in lines if s.strip().startswith("rmse"))
+    assert rmse == pytest.approx(tum_ate(gt, est), abs=1e-6)
