@@ -79,21 +79,33 @@ class LocalExecutor(Executor):
         self.workers = int(workers or os.cpu_count() or 1)
         if self.workers < 1:
             raise ConfigError(f"workers must be >= 1, got {workers}")
+        self._pool: Any = None
+
+    def _get_pool(self) -> Any:
+        if self._pool is None:
+            import multiprocessing as mp
+            from concurrent.futures import ProcessPoolExecutor
+
+            method = "forkserver" if sys.platform.startswith("linux") else "spawn"
+            ctx = mp.get_context(method)
+            if method == "forkserver":  # workers fork from a server that imported these
+                ctx.set_forkserver_preload(["torch", "torchratslam.sweeps.executors"])
+            self._pool = ProcessPoolExecutor(
+                max_workers=self.workers,
+                mp_context=ctx,
+                initializer=_worker_init,
+                initargs=(_threads(),),
+            )
+        return self._pool
 
     def map(self, units: Sequence[Unit], on_start: Callable[[Unit], None]) -> Iterator[Result]:
-        import multiprocessing as mp
-        from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+        from concurrent.futures import FIRST_COMPLETED, wait
 
-        method = "forkserver" if sys.platform.startswith("linux") else "spawn"
-        ctx = mp.get_context(method)
-        if method == "forkserver":
-            ctx.set_forkserver_preload(["torchratslam.sweeps.runner"])
+        pool = self._get_pool()
         threads = _threads()
         pending = list(units)
-        with ProcessPoolExecutor(
-            max_workers=self.workers, mp_context=ctx, initializer=_worker_init, initargs=(threads,)
-        ) as pool:
-            running: dict[Any, Unit] = {}
+        running: dict[Any, Unit] = {}
+        try:
             while pending or running:
                 while pending and len(running) < self.workers:
                     unit = pending.pop(0)
@@ -103,6 +115,14 @@ class LocalExecutor(Executor):
                 for fut in done:
                     unit = running.pop(fut)
                     yield unit, fut.result()
+        finally:
+            for fut in running:
+                fut.cancel()
+
+    def close(self) -> None:
+        if self._pool is not None:
+            self._pool.shutdown(wait=True, cancel_futures=True)
+            self._pool = None
 
 
 class RayExecutor(Executor):

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import logging
 import math
+import warnings
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -157,6 +158,11 @@ def _constraint(trial: Any) -> Sequence[float]:
     return trial.user_attrs.get("constraint", (0.0,))
 
 
+def _set_constraint(trial: Any, value: float) -> None:
+    """Record ``value`` (<= 0: feasible) where the sampler reads it."""
+    trial.set_user_attr("constraint", (value,))
+
+
 def tune(
     data: str | Sequence[str] = DEFAULT_DATA,
     params: Mapping[str, Any] | None = None,
@@ -232,7 +238,10 @@ def tune(
     if out_dir is not None:
         out_dir.mkdir(parents=True, exist_ok=True)
     optuna.logging.set_verbosity(optuna.logging.WARNING)
-    sampler = optuna.samplers.TPESampler(seed=sampler_seed, constraints_func=_constraint)
+    constrained = {} if max_experiences is None else {"constraints_func": _constraint}
+    with warnings.catch_warnings():  # Optuna 5 prefers Trial.set_constraint; both work
+        warnings.simplefilter("ignore", FutureWarning)
+        sampler = optuna.samplers.TPESampler(seed=sampler_seed, **constrained)
     study = optuna.create_study(
         study_name=study_name,
         storage=_storage(optuna, storage, out_dir),
@@ -295,7 +304,8 @@ def tune(
             all_runs = [r for rs in runs.values() for r in rs]
             rows: dict[str, dict[str, Any]] = {}
             units = make_units(all_runs, executor.workers)
-            for _unit, unit_rows in executor.map(units, lambda u: bar.start(0)):
+            bar.start(len(batch))
+            for _unit, unit_rows in executor.map(units, lambda u: None):
                 for row in unit_rows:
                     rows[str(row["run_id"])] = row
             for trial in batch:
@@ -320,7 +330,7 @@ def tune(
                     continue
                 if max_experiences is not None:
                     exps = trial.user_attrs["experiences"]
-                    trial.set_user_attr("constraint", (float(exps - max_experiences),))
+                    _set_constraint(trial, float(exps - max_experiences))
                 study.tell(trial, value)
                 best = _best(study, optuna)
                 bar.finish(1, 0, None if best is None else f"{best.value:.4g}")
@@ -411,8 +421,6 @@ def _plots(study: Any, out: Path, optuna: Any, metric: str) -> None:
     import matplotlib
 
     matplotlib.use("Agg", force=False)
-    import warnings
-
     from optuna.visualization import matplotlib as ovm
 
     from torchratslam.viz.plots import save_figure
