@@ -161,8 +161,10 @@ def main(args: argparse.Namespace) -> int:
         f"{k}={v:.4g}" if isinstance(v, float) and math.isfinite(v) else f"{k}={v}"
         for k, v in result["best_params"].items()
     )
+    base = result.get("baseline_value")
+    vs = f" (the base config's: {base:.4f})" if base is not None else ""
     print(
-        f"best {args.metric} {result['best_value']:.4f} (trial {result['best_trial']} of "
-        f"{result['trials']}): {values}; wrote {Path(args.out) / 'best.yaml'}"
+        f"best {args.metric} {result['best_value']:.4f}{vs} in trial {result['best_trial']} "
+        f"of {result['trials']}: {values}; wrote {Path(args.out) / 'best.yaml'}"
     )
     return 0

@@ -141,14 +141,14 @@ class RayExecutor(Executor):
         self._ray = ray
         self._started = False
         if not ray.is_initialized():
-            env = {"TORCHRATSLAM_THREADS": str(_threads())}
-            kwargs: dict[str, Any] = {
-                "runtime_env": {"env_vars": env},
-                "log_to_driver": False,
-                "logging_level": logging.ERROR,
-            }
+            # the thread count travels with each task (no runtime_env: it slows the start)
+            kwargs: dict[str, Any] = {"log_to_driver": False, "logging_level": logging.ERROR}
             if address is None:
-                kwargs.update(num_cpus=workers or os.cpu_count() or 1, include_dashboard=False)
+                kwargs.update(
+                    num_cpus=workers or os.cpu_count() or 1,
+                    include_dashboard=False,
+                    object_store_memory=100 * 1024 * 1024,
+                )
             else:
                 kwargs["address"] = address
             ray.init(**kwargs)

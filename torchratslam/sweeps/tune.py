@@ -179,6 +179,7 @@ def tune(
     storage: str | None = None,
     study_name: str = "torchratslam",
     resume: bool = False,
+    baseline: bool = True,
     sampler_seed: int = 0,
     workers: int | None = None,
     ray: bool = False,
@@ -204,13 +205,16 @@ def tune(
             ``out/study.journal``; in memory when ``out`` is None).
         study_name: the study's name in the storage.
         resume: continue a study that already has trials (else that is an error).
+        baseline: make trial 0 the base config's own values (when inside the ranges),
+            so the study reports how much it improved on it.
         sampler_seed: seed of the TPE sampler.
         workers, ray, ray_address, executor: where trials run (as :func:`sweep`).
         progress: show the progress bar with the best value so far.
 
     Returns:
         ``{"best_value", "best_params", "best_trial", "best_config" (flat dict),
-        "trials" (count), "history" (rows), "study"}``.
+        "baseline_value" (trial 0's when ``baseline``), "trials" (count), "history"
+        (rows), "study"}``.
 
     Raises:
         ConfigError: Optuna missing, bad ranges, unknown keys or metric.
@@ -257,6 +261,11 @@ def tune(
             "resume=True (--resume) to continue it, or choose another out / study name"
         )
     # trials left RUNNING by a killed process stay so; the study just asks new ones
+    if baseline and not study.trials:  # trial 0: the base config itself, for comparison
+        flat = base.to_flat()
+        start = {r.key: flat[r.key] for r in space}
+        if all(_inside(r, v) for r, v in zip(space, start.values())):
+            study.enqueue_trial(start, user_attrs={"baseline": True})
     own_executor = executor is None
     if executor is None:
         import os
@@ -345,6 +354,7 @@ def tune(
         "best_params": {} if best is None else dict(best.params),
         "best_trial": None if best is None else best.number,
         "trials": len(history),
+        "baseline_value": _baseline_value(study, optuna),
         "history": history,
         "study": study,
     }
@@ -364,6 +374,7 @@ def tune(
             "ate_m",
             "dead_reckoning_ate_m",
             "wall_s",
+            "baseline",
             "error",
         ]
         atomic_write_text(out_dir / "history.csv", csv_text(history, cols))
@@ -373,6 +384,19 @@ def tune(
             )
         _plots(study, out_dir, optuna, metric)
     return result
+
+
+def _inside(r: Range, v: Any) -> bool:
+    if r.choices:
+        return v in r.choices
+    return isinstance(v, (int, float)) and r.low <= float(v) <= r.high
+
+
+def _baseline_value(study: Any, optuna: Any) -> float | None:
+    for t in study.trials:
+        if t.user_attrs.get("baseline") and t.state == optuna.trial.TrialState.COMPLETE:
+            return float(t.value)
+    return None
 
 
 def _best(study: Any, optuna: Any) -> Any:
@@ -398,6 +422,7 @@ def _history(study: Any, space: Sequence[Range]) -> list[dict[str, Any]]:
             row[r.key] = t.params.get(r.key, "")
         for k in ("experiences", "templates", "links", "ate_m", "dead_reckoning_ate_m", "wall_s"):
             row[k] = t.user_attrs.get(k, math.nan)
+        row["baseline"] = bool(t.user_attrs.get("baseline", False))
         row["error"] = t.user_attrs.get("error", "")
         rows.append(row)
     return rows

@@ -3,8 +3,8 @@
 import itertools
 
 import pytest
-
 from torchratslam.graph.errors import ConfigError, InputError
+
 from torchratslam.sweeps.spec import from_dict, load_sweep, parse_values, with_seed
 
 
@@ -21,7 +21,10 @@ def test_grid_expands_every_combination_in_order():
     expected = [
         (ds, seed, be, th, loops)
         for ds, seed, be, th, loops in itertools.product(
-            ["sim:loop?laps=1", "sim:lab_tour"], [0, 3], ["alpha", "gtsam"], [0.03, 0.05],
+            ["sim:loop?laps=1", "sim:lab_tour"],
+            [0, 3],
+            ["alpha", "gtsam"],
+            [0.03, 0.05],
             [5, 10, 20],
         )
     ]
