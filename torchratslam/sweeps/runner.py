@@ -23,11 +23,14 @@ column                     meaning
 Runs whose configs differ only in parameters the local view and the pose-cell network
 do not read (``vt_active_decay``, ``pc_vt_inject_energy``, ``pc_vt_restore``,
 ``exp_delta_pc_threshold`` and every experience-map key, backends included) see exactly
-the same views and the same odometry, so :func:`run_group` computes the frames, the
-odometry and the local view once, steps one :class:`PoseCellNetwork` with ``B``
-networks per frame (one per run), and gives each run its own pose-cell bookkeeping and
-experience map. The map of each run equals the map of a separate run bit for bit
-(``tests/torchratslam/sweeps/test_batched.py``).
+the same views and the same odometry, so :func:`run_group` reads the frames and
+computes the odometry and local view once, and gives each run its own pose-cell
+bookkeeping and experience map. When the network computes its dynamics on the whole
+network (``separable``/``conv3d``, e.g. OpenRatSLAM's 21x21x36), one
+:class:`PoseCellNetwork` with ``B`` networks steps all runs in one call per frame;
+cropped networks (large ones) step one by one, since a batch's crop box follows its
+widest packet and would change the others' rounding. Either way the rows equal
+separate runs' bit for bit (``tests/torchratslam/sweeps/test_batched.py``).
 """
 
 from __future__ import annotations
@@ -198,6 +201,17 @@ def batch_key(run: RunSpec) -> tuple | None:
     return (run.data, run.max_frames, shared)
 
 
+def shares_network(network: Any) -> bool:
+    """Whether a group may step its runs' networks as one batched network.
+
+    Only networks whose dynamics run on the whole network (``separable``, ``conv3d``)
+    give the same numbers in a batch as alone; the ``crop`` method sizes its box by the
+    widest packet of the batch, which changes the rounding of the others. Groups of
+    cropped networks still share the frames, odometry and local view.
+    """
+    return getattr(network, "method", None) in ("separable", "conv3d")
+
+
 class _SlotNetwork:
     """Network ``b`` of a shared batched :class:`PoseCellNetwork`, as the pose-cell
     module sees it: injections are queued until the whole batch steps, and ``step``
@@ -275,12 +289,13 @@ def _frames(data: Any, max_frames: int | None) -> Iterator[Any]:
 
 
 def run_group(runs: Sequence[RunSpec]) -> list[dict[str, Any]]:
-    """Run several configurations that share a :func:`batch_key` with one batched
-    pose-cell network (exceptions propagate; one row per run, in order).
+    """Run several configurations that share a :func:`batch_key` as one group
+    (exceptions propagate; one row per run, in order).
 
     The frames are read, and the odometry and local view computed, once; each frame
-    steps all ``B`` pose-cell networks in one call; each run then replays its actions
-    through its own :class:`~torchratslam.pipeline.RatSLAM` (its own experience map).
+    steps all ``B`` pose-cell networks in one call (when :func:`shares_network`, else
+    one by one); each run then replays its views and actions through its own
+    :class:`~torchratslam.pipeline.RatSLAM` (its own experience map).
     """
     import torch
 
@@ -294,13 +309,14 @@ def run_group(runs: Sequence[RunSpec]) -> list[dict[str, Any]]:
     t0 = time.perf_counter()
     ref = RatSLAM(configs[0], odometry=_odometry_for(data, configs[0]))
     modules = [PoseCells(c.pose_cells) for c in configs]
-    method = modules[0].network.method  # the separate runs' method: same numbers
-    shared = PoseCellNetwork(configs[0].pose_cells, len(runs), method=method)
-    slots = []
-    for b, m in enumerate(modules):
-        slot = _SlotNetwork(shared, b, m.network.dims)
-        m.network = slot
-        slots.append(slot)
+    slots: list[_SlotNetwork] = []
+    shared = None
+    if shares_network(modules[0].network):
+        shared = PoseCellNetwork(configs[0].pose_cells, len(runs), method=modules[0].network.method)
+        for b, m in enumerate(modules):
+            slot = _SlotNetwork(shared, b, m.network.dims)
+            m.network = slot
+            slots.append(slot)
     frames, odos, views, sizes = [], [], [], []
     actions: list[list[Any]] = [[] for _ in runs]
     centres: list[list[tuple]] = [[] for _ in runs]
@@ -318,17 +334,19 @@ def run_group(runs: Sequence[RunSpec]) -> list[dict[str, Any]]:
         sizes.append(len(ref.local_view))
         for m in modules:
             m.on_view_template(view)
-        inj = [s.pending for s in slots]
-        if any(p is not None for p in inj):
-            x, y, th, e = zeros.copy(), zeros.copy(), zeros.copy(), np.zeros(len(runs))
-            for b, p in enumerate(inj):
-                if p is not None:
-                    x[b], y[b], th[b], e[b] = p
-                    slots[b].pending = None
-            shared.inject(x, y, th, e)
-        cents = shared.step(odo[0], odo[1], odo[2]) if len(runs) else None
+        if shared is not None:  # every network in one call
+            inj = [s.pending for s in slots]
+            if any(p is not None for p in inj):
+                x, y, th, e = zeros.copy(), zeros.copy(), zeros.copy(), np.zeros(len(runs))
+                for b, p in enumerate(inj):
+                    if p is not None:
+                        x[b], y[b], th[b], e[b] = p
+                        slots[b].pending = None
+                shared.inject(x, y, th, e)
+            cents = shared.step(odo[0], odo[1], odo[2])
+            for b, slot in enumerate(slots):
+                slot.centre_row = cents[b : b + 1]
         for b, m in enumerate(modules):
-            slots[b].centre_row = cents[b : b + 1]
             actions[b].append(m.on_odometry(*odo))
             c = m.centre
             centres[b].append((float(c[0]), float(c[1]), float(c[2])))

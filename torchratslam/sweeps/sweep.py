@@ -48,7 +48,15 @@ def make_units(runs: list[RunSpec], workers: int, batch: bool = True) -> list[li
 class Progress:
     """One overall bar: runs done (with ETA), running and failed; ``best`` for studies."""
 
-    def __init__(self, total: int, done: int = 0, *, enabled: bool = True, desc: str = "sweep"):
+    def __init__(
+        self,
+        total: int,
+        done: int = 0,
+        *,
+        enabled: bool = True,
+        desc: str = "sweep",
+        unit: str = "run",
+    ):
         self.running = 0
         self.failed = 0
         self.best: str | None = None
@@ -57,7 +65,7 @@ class Progress:
             from tqdm import tqdm
 
             self.bar = tqdm(
-                total=total, initial=done, unit="run", desc=desc, dynamic_ncols=True, smoothing=0.1
+                total=total, initial=done, unit=unit, desc=desc, dynamic_ncols=True, smoothing=0.1
             )
 
     def _post(self) -> None:

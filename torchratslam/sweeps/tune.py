@@ -272,7 +272,7 @@ def tune(
 
         n = workers or min(os.cpu_count() or 1, trials)
         executor = make_executor(workers=n, ray=ray, ray_address=ray_address)
-    bar = Progress(trials, min(n_done, trials), enabled=progress, desc="tune")
+    bar = Progress(trials, min(n_done, trials), enabled=progress, desc="tune", unit="trial")
     try:
         while True:
             n_done = sum(1 for t in study.trials if t.state in finished_states)

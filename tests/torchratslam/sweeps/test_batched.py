@@ -2,7 +2,16 @@
 
 import math
 
-from torchratslam.sweeps.runner import TIMING_COLUMNS, batch_key, run_group, run_one
+import pytest
+
+from torchratslam.pose_cells.network import PoseCells
+from torchratslam.sweeps.runner import (
+    TIMING_COLUMNS,
+    batch_key,
+    run_group,
+    run_one,
+    shares_network,
+)
 from torchratslam.sweeps.spec import from_dict
 from torchratslam.sweeps.sweep import make_units
 
@@ -14,11 +23,22 @@ def _strip(row):
     return {k: v for k, v in row.items() if k not in TIMING_COLUMNS}
 
 
-def test_batched_group_equals_separate_runs():
+@pytest.mark.parametrize(
+    "cells, one_network",
+    [((21, 36), True), ((30, 35), False)],
+    ids=["batched-network", "cropped-networks"],
+)
+def test_batched_group_equals_separate_runs(cells, one_network):
+    xy, th = cells
     spec = from_dict(
         {
             "base": "virtual_tour",
-            "set": {"pc_dim_xy": 30, "exp_loops": 20, "vt_match_threshold": 0.08},
+            "set": {
+                "pc_dim_xy": xy,
+                "pc_dim_th": th,
+                "exp_loops": 20,
+                "vt_match_threshold": 0.08,
+            },
             "mode": "list",
             "parameters": {
                 "pc_vt_inject_energy": [0.02, 0.3, 0.15],
@@ -31,6 +51,8 @@ def test_batched_group_equals_separate_runs():
     )
     runs = spec.runs()
     assert len({batch_key(r) for r in runs}) == 1  # one group
+    # 21x21x36 networks step as one batched network; cropped ones share the views only
+    assert shares_network(PoseCells(runs[0].config().pose_cells).network) == one_network
     assert make_units(runs, workers=1) == [runs]
     batched = run_group(runs)
     separate = [run_one(r) for r in runs]

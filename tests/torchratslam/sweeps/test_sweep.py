@@ -32,7 +32,7 @@ SWEEP = {
 @pytest.fixture(scope="module")
 def sweep_file(tmp_path_factory):
     path = tmp_path_factory.mktemp("sweep") / "sweep.yaml"
-    path.write_text(yaml.safe_dump(SWEEP))
+    path.write_text(yaml.safe_dump(SWEEP, sort_keys=False))
     return path
 
 
