@@ -48,18 +48,22 @@ def register(subparsers: Any) -> argparse.ArgumentParser:
     p.add_argument(
         "--resume",
         action="store_true",
-        help="keep the finished runs of OUT/results.csv and run only the others",
+        help="keep the finished runs of OUT/results.csv and run only the others, e.g. --resume",
     )
     p.add_argument(
-        "--retry-failed", action="store_true", help="with --resume, run failed runs again too"
+        "--retry-failed",
+        action="store_true",
+        help="with --resume, run failed runs again too, e.g. --resume --retry-failed",
     )
     p.add_argument(
         "--no-batch",
         action="store_true",
-        help="never share a batched pose-cell network between runs",
+        help="run every run alone (no shared frames, views or batched pose cells), e.g. --no-batch",
     )
-    p.add_argument("--no-figures", action="store_true", help="write the table only")
-    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument(
+        "--no-figures", action="store_true", help="write the table only, e.g. --no-figures"
+    )
+    p.add_argument("--no-progress", action="store_true", help="no progress bar, e.g. --no-progress")
     p.set_defaults(func=main)
     return p
 
@@ -75,7 +79,9 @@ def add_execution_args(p: argparse.ArgumentParser) -> None:
         "process), e.g. --workers 4",
     )
     p.add_argument(
-        "--ray", action="store_true", help="run on Ray's own local cluster (pip install ray)"
+        "--ray",
+        action="store_true",
+        help="run on Ray's own local cluster (pip install 'torchratslam[ray]'), e.g. --ray",
     )
     p.add_argument(
         "--ray-address",

@@ -73,8 +73,19 @@ def register(subparsers: Any) -> argparse.ArgumentParser:
         default="ate_m",
         help="metric to minimise (a results-table column; default ate_m), e.g. --metric links",
     )
-    p.add_argument("--trials", type=int, default=20, help="trials in the study (default 20)")
-    p.add_argument("--max-frames", type=int, default=None, metavar="N", help="frames per dataset")
+    p.add_argument(
+        "--trials",
+        type=int,
+        default=20,
+        help="finished trials the study should have (default 20), e.g. --trials 40",
+    )
+    p.add_argument(
+        "--max-frames",
+        type=int,
+        default=None,
+        metavar="N",
+        help="frames per dataset, e.g. --max-frames 500",
+    )
     p.add_argument(
         "--seeds", default="0", metavar="S,S", help="simulator seeds (default 0), e.g. --seeds 0,1"
     )
@@ -97,13 +108,22 @@ def register(subparsers: Any) -> argparse.ArgumentParser:
         default=None,
         metavar="URL",
         help="Optuna storage shared by workers: a journal file or sqlite:///FILE "
-        "(default OUT/study.journal)",
+        "(default OUT/study.journal), e.g. --storage sqlite:///studies.db",
     )
-    p.add_argument("--study-name", default="torchratslam", help="study name in the storage")
-    p.add_argument("--seed", type=int, default=0, help="sampler seed (default 0)")
+    p.add_argument(
+        "--study-name",
+        default="torchratslam",
+        help="study name in the storage, e.g. --study-name loop",
+    )
+    p.add_argument("--seed", type=int, default=0, help="sampler seed (default 0), e.g. --seed 1")
     add_execution_args(p)
-    p.add_argument("--resume", action="store_true", help="continue the study in the storage")
-    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument(
+        "--resume",
+        action="store_true",
+        help="continue the study in the storage (also to join it from another process), "
+        "e.g. --resume",
+    )
+    p.add_argument("--no-progress", action="store_true", help="no progress bar, e.g. --no-progress")
     p.set_defaults(func=main)
     return p
 
