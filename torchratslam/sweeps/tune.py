@@ -459,6 +459,9 @@ def _plots(study: Any, out: Path, optuna: Any, metric: str) -> None:
         from torchratslam.viz.sweeps import METRIC_LABELS
 
         ax.set_ylabel(f"objective: {METRIC_LABELS.get(metric, metric)}")
+        vals = [t.value for t in complete if t.value is not None and t.value > 0]
+        if vals and len(vals) == len(complete) and max(vals) > 20 * min(vals):
+            ax.set_yscale("log")  # one bad trial would flatten the rest
         save_figure(ax.figure, out / "optimization_history.png")
         if len(complete) >= 2 and len(complete[0].params) >= 2:
             try:
