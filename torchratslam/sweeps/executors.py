@@ -14,7 +14,7 @@ import sys
 from collections.abc import Callable, Iterator, Sequence
 from typing import Any
 
-from torchratslam.graph.errors import ConfigError
+from torchratslam.graph.errors import ConfigError, RatSLAMError
 from torchratslam.sweeps.runner import run_group_safely
 from torchratslam.sweeps.spec import RunSpec
 
@@ -100,6 +100,7 @@ class LocalExecutor(Executor):
 
     def map(self, units: Sequence[Unit], on_start: Callable[[Unit], None]) -> Iterator[Result]:
         from concurrent.futures import FIRST_COMPLETED, wait
+        from concurrent.futures.process import BrokenProcessPool
 
         pool = self._get_pool()
         threads = _threads()
@@ -114,7 +115,16 @@ class LocalExecutor(Executor):
                 done, _ = wait(list(running), return_when=FIRST_COMPLETED)
                 for fut in done:
                     unit = running.pop(fut)
-                    yield unit, fut.result()
+                    try:
+                        rows = fut.result()
+                    except BrokenProcessPool:
+                        self._pool = None
+                        raise RatSLAMError(
+                            "a sweep worker process died (out of memory or killed); the "
+                            "finished runs are in the table: run again with resume "
+                            "(--resume), perhaps with fewer --workers"
+                        ) from None
+                    yield unit, rows
         finally:
             for fut in running:
                 fut.cancel()
