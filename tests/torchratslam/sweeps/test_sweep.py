@@ -166,6 +166,12 @@ def test_failed_run_is_recorded_and_the_sweep_goes_on(tmp_path):
     assert [r["status"] for r in rows] == ["ok", "ok", "error", "error"]
     assert all("InputError" in r["error"] and "laps" in r["error"] for r in rows[2:])
     assert all(r["frames"] == 12 for r in rows[:2])
+    if _has("pyarrow"):  # the Parquet copy holds the same rows, errors included
+        import pyarrow.parquet as pq
+
+        pq_rows = pq.read_table(tmp_path / "results.parquet").to_pylist()
+        assert [r["status"] for r in pq_rows] == ["ok", "ok", "error", "error"]
+        assert [r["run_id"] for r in pq_rows] == [r["run_id"] for r in rows]
     # resume keeps failed runs unless asked to retry them
     again = torchratslam.sweep(raw, tmp_path, resume=True, workers=1, progress=False, figures=False)
     assert len(again) == 4
