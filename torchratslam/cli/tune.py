@@ -120,7 +120,8 @@ def register(subparsers: Any) -> argparse.ArgumentParser:
     p.add_argument(
         "--resume",
         action="store_true",
-        help="continue the study in the storage (also to join it from another process), "
+        help="continue the study in the storage; several processes may run the same "
+        "command with --resume at once to share one study, "
         "e.g. --resume",
     )
     p.add_argument("--no-progress", action="store_true", help="no progress bar, e.g. --no-progress")

@@ -154,6 +154,12 @@ def _objective(rows: Sequence[dict[str, Any]], metric: str, map_penalty: float) 
     return value
 
 
+def _sampler(optuna: Any, seed: int, constrained: dict[str, Any]) -> Any:
+    with warnings.catch_warnings():  # Optuna 5 prefers Trial.set_constraint; both work
+        warnings.simplefilter("ignore", FutureWarning)
+        return optuna.samplers.TPESampler(seed=seed, **constrained)
+
+
 def _constraint(trial: Any) -> Sequence[float]:
     return trial.user_attrs.get("constraint", (0.0,))
 
@@ -207,7 +213,9 @@ def tune(
         resume: continue a study that already has trials (else that is an error).
         baseline: make trial 0 the base config's own values (when inside the ranges),
             so the study reports how much it improved on it.
-        sampler_seed: seed of the TPE sampler.
+        sampler_seed: seed of the TPE sampler (with ``resume``, the sampler is seeded
+            from this, the trial count and the process id, so that processes sharing a
+            study explore different values).
         workers, ray, ray_address, executor: where trials run (as :func:`sweep`).
         progress: show the progress bar with the best value so far.
 
@@ -243,9 +251,7 @@ def tune(
         out_dir.mkdir(parents=True, exist_ok=True)
     optuna.logging.set_verbosity(optuna.logging.WARNING)
     constrained = {} if max_experiences is None else {"constraints_func": _constraint}
-    with warnings.catch_warnings():  # Optuna 5 prefers Trial.set_constraint; both work
-        warnings.simplefilter("ignore", FutureWarning)
-        sampler = optuna.samplers.TPESampler(seed=sampler_seed, **constrained)
+    sampler = _sampler(optuna, sampler_seed, constrained)
     study = optuna.create_study(
         study_name=study_name,
         storage=_storage(optuna, storage, out_dir),
@@ -259,6 +265,13 @@ def tune(
         raise InputError(
             f"study {study_name!r} already has {n_done} trials in its storage; pass "
             "resume=True (--resume) to continue it, or choose another out / study name"
+        )
+    if resume:  # resuming or joining: a seed of its own, or processes sharing the
+        # study would suggest the same values (a new study keeps `sampler_seed`)
+        import os
+
+        study.sampler = _sampler(
+            optuna, hash((sampler_seed, len(study.trials), os.getpid())) % 2**31, constrained
         )
     # trials left RUNNING by a killed process stay so; the study just asks new ones
     if baseline and not study.trials:  # trial 0: the base config itself, for comparison
