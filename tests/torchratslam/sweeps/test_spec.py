@@ -100,3 +100,9 @@ def test_load_sweep_file(tmp_path):
     p.write_text("parameters: [\n")
     with pytest.raises(ConfigError, match="YAML"):
         load_sweep(p)
+
+
+def test_example_sweep_file_is_valid():
+    root = __import__("pathlib").Path(__file__).resolve().parents[3]
+    runs = load_sweep(root / "examples" / "sweep_loop.yaml").runs()
+    assert len(runs) == 3 * 4 * 2
