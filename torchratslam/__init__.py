@@ -19,6 +19,8 @@ __all__ = [
     "RatSLAMError",
     "__version__",
     "load_config",
+    "sweep",
+    "tune",
 ]
 
 
@@ -28,4 +30,8 @@ def __getattr__(name: str):
         from torchratslam.pipeline import RatSLAM
 
         return RatSLAM
+    if name in ("sweep", "tune"):  # parameter sweeps and Optuna studies
+        from torchratslam import sweeps
+
+        return getattr(sweeps, name)
     raise AttributeError(f"module 'torchratslam' has no attribute {name!r}")

@@ -1,0 +1,65 @@
+"""``torchratslam sweep`` and ``tune``: help conventions and one-line errors."""
+
+import pytest
+
+from torchratslam.cli import build_parser, main
+
+
+def _subparser(name):
+    for action in build_parser()._subparsers._group_actions:
+        if name in action.choices:
+            return action.choices[name]
+    raise AssertionError(f"no subcommand {name}")
+
+
+@pytest.mark.parametrize("name", ["sweep", "tune"])
+def test_every_option_help_has_an_example(name):
+    sub = _subparser(name)
+    for action in sub._actions:
+        if action.dest != "help":
+            assert action.help and "e.g." in action.help, (name, action.option_strings)
+    assert "examples:" in sub.format_help()
+
+
+@pytest.mark.parametrize(
+    "argv, message",
+    [
+        (["sweep", "missing.yaml", "--out", "{tmp}/o"], "not found"),
+        (["sweep", "{tmp}/bad.yaml", "--out", "{tmp}/o"], "vt_match_threshold"),
+        (["sweep", "{tmp}/good.yaml", "--out", "{tmp}/o", "--workers", "0"], "--workers"),
+        (["tune", "--out", "{tmp}/t", "--param", "vt_match_threshold=0.2:0.1"], "below high"),
+        (["tune", "--out", "{tmp}/t", "--param", "nope=1:2"], "nope"),
+        (["tune", "--out", "{tmp}/t", "--metric", "speed"], "unknown metric"),
+    ],
+)
+def test_bad_input_is_one_line_and_exit_2(argv, message, tmp_path, capsys):
+    (tmp_path / "bad.yaml").write_text("parameters: {vt_match_threshhold: [0.1]}\n")
+    (tmp_path / "good.yaml").write_text("parameters: {exp_loops: [1]}\n")
+    code = main([a.replace("{tmp}", str(tmp_path)) for a in argv])
+    err = capsys.readouterr().err
+    assert code == 2
+    assert message in err and "Traceback" not in err
+
+
+def test_sweep_command_writes_the_table(tmp_path, capsys):
+    f = tmp_path / "s.yaml"
+    f.write_text(
+        "base: virtual_tour\nset: {pc_dim_xy: 21}\nparameters: {exp_loops: [1, 3]}\n"
+        "datasets: ['sim:loop?frames=15&lasers=0']\n"
+    )
+    code = main(
+        [
+            "sweep",
+            str(f),
+            "--out",
+            str(tmp_path / "o"),
+            "--workers",
+            "1",
+            "--no-progress",
+            "--no-figures",
+        ]
+    )
+    assert code == 0
+    out = capsys.readouterr().out
+    assert "2 runs (0 failed)" in out and "best ATE" in out
+    assert (tmp_path / "o" / "results.csv").read_text().count("\n") == 3

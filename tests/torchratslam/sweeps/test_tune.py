@@ -1,0 +1,88 @@
+"""Optuna studies: best config as a ready YAML, history, plots, resume, constraints."""
+
+import csv
+
+import pytest
+from torchratslam.graph.errors import ConfigError, InputError
+
+from torchratslam.config import load_config
+from torchratslam.sweeps.tune import parse_range
+
+optuna = pytest.importorskip("optuna")
+from torchratslam.sweeps import tune  # noqa: E402
+
+DATA = "sim:loop?laps=1&frames=20&lasers=0"
+SPACE = {"vt_match_threshold": "0.03:0.1", "pc_vt_inject_energy": "0.05:0.3:log"}
+FIXED = {"pc_dim_xy": 21, "exp_loops": 5}
+
+
+def _history(path):
+    with open(path, newline="") as fh:
+        return list(csv.DictReader(fh))
+
+
+def test_study_writes_best_config_history_and_plots_then_resumes(tmp_path):
+    kw = dict(
+        config="virtual_tour",
+        fixed=FIXED,
+        workers=1,
+        progress=False,
+        out=tmp_path,
+        map_penalty=0.001,
+    )
+    res = tune(DATA, SPACE, trials=3, **kw)
+    hist = _history(tmp_path / "history.csv")
+    assert len(hist) == res["trials"] == 3
+    assert all(h["state"] == "complete" for h in hist)
+    for h in hist:  # the objective: ATE plus the map penalty per experience
+        assert float(h["value"]) == pytest.approx(
+            float(h["ate_m"]) + 0.001 * float(h["experiences"]), rel=1e-12
+        )
+        assert 0.03 <= float(h["vt_match_threshold"]) <= 0.1
+    best = min(hist, key=lambda h: float(h["value"]))
+    assert res["best_value"] == pytest.approx(float(best["value"]))
+    cfg = load_config(tmp_path / "best.yaml")  # a ready config
+    assert cfg.local_view.vt_match_threshold == pytest.approx(float(best["vt_match_threshold"]))
+    assert cfg.pose_cells.pc_vt_inject_energy == pytest.approx(float(best["pc_vt_inject_energy"]))
+    assert cfg.pose_cells.pc_dim_xy == 21
+    assert (tmp_path / "optimization_history.png").stat().st_size > 0
+    assert (tmp_path / "param_importances.png").stat().st_size > 0
+    with pytest.raises(InputError, match="resume"):
+        tune(DATA, SPACE, trials=4, **kw)
+    res2 = tune(DATA, SPACE, trials=4, resume=True, **kw)
+    hist2 = _history(tmp_path / "history.csv")
+    assert len(hist2) == res2["trials"] == 4
+    assert hist2[:3] == hist  # finished trials kept, not redone
+
+
+def test_constraint_on_map_size(tmp_path):
+    res = tune(
+        DATA,
+        {"vt_match_threshold": "0.03:0.12"},
+        config="virtual_tour",
+        fixed=FIXED,
+        trials=4,
+        max_experiences=15,
+        workers=1,
+        progress=False,
+        out=tmp_path,
+    )
+    hist = _history(tmp_path / "history.csv")
+    feasible = [h for h in hist if float(h["experiences"]) <= 15]
+    if feasible:
+        assert res["best_value"] == pytest.approx(min(float(h["value"]) for h in feasible))
+    else:
+        assert res["best_value"] is None
+
+
+def test_ranges():
+    r = parse_range("k", "0.1:2:log")
+    assert (r.low, r.high, r.log, r.integer) == (0.1, 2.0, True, False)
+    assert parse_range("k", "1:9:int").integer
+    assert parse_range("k", "alpha,gtsam").choices == ("alpha", "gtsam")
+    assert parse_range("k", [0.5, 1.5]).high == 1.5
+    for bad in ("2:1", "0:1:log", "1:2:cubic", "x"):
+        with pytest.raises(ConfigError):
+            parse_range("k", bad)
+    with pytest.raises(ConfigError, match="vt_match_threshold"):
+        tune(DATA, {"vt_match_thresold": "0.1:0.2"}, trials=1, progress=False)

@@ -1,0 +1,400 @@
+"""One sweep run (or one batched group of runs) -> one table row each.
+
+A row holds the run's identity (``index``, ``run_id``, ``dataset``, ``seed``,
+``backend``), its swept parameter values, ``status`` (``ok`` or ``error``), ``error``
+(the one-line message of a failed run) and the metrics of ``torchratslam run``:
+
+=========================  ==========================================================
+column                     meaning
+=========================  ==========================================================
+``frames``                 frames processed
+``templates``              visual templates at the end
+``experiences``            experiences at the end
+``links``                  experience-map links at the end
+``ate_m``                  ATE (m) of the experience trajectory vs ground truth
+``dead_reckoning_ate_m``   ATE (m) of the integrated odometry alone
+``wall_s``                 wall-clock seconds of the run (timing)
+``fps``                    frames per second (timing)
+``ms_<module>``            mean ms per frame of odometry, local_view, pose_cells,
+                           experience_map (timing)
+``batch``                  how many runs shared one batched pose-cell network (timing)
+=========================  ==========================================================
+
+Runs whose configs differ only in parameters the local view and the pose-cell network
+do not read (``vt_active_decay``, ``pc_vt_inject_energy``, ``pc_vt_restore``,
+``exp_delta_pc_threshold`` and every experience-map key, backends included) see exactly
+the same views and the same odometry, so :func:`run_group` reads the frames and
+computes the odometry and local view once, and gives each run its own pose-cell
+bookkeeping and experience map. When the network computes its dynamics on the whole
+network (``separable``/``conv3d``, e.g. OpenRatSLAM's 21x21x36), one
+:class:`PoseCellNetwork` with ``B`` networks steps all runs in one call per frame;
+cropped networks (large ones) step one by one, since a batch's crop box follows its
+widest packet and would change the others' rounding. Either way the rows equal
+separate runs' bit for bit (``tests/torchratslam/sweeps/test_batched.py``).
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import time
+from collections.abc import Iterator, Sequence
+from typing import Any
+
+import numpy as np
+
+from torchratslam.sweeps.spec import RunSpec
+
+__all__ = [
+    "METRICS",
+    "MODULES",
+    "TIMING_COLUMNS",
+    "batch_key",
+    "run_group",
+    "run_one",
+    "run_safely",
+]
+
+log = logging.getLogger(__name__)
+
+MODULES = ("odometry", "local_view", "pose_cells", "experience_map")
+METRICS = (
+    "frames",
+    "templates",
+    "experiences",
+    "links",
+    "ate_m",
+    "dead_reckoning_ate_m",
+    "wall_s",
+    "fps",
+    *(f"ms_{m}" for m in MODULES),
+    "batch",
+)
+TIMING_COLUMNS = ("wall_s", "fps", *(f"ms_{m}" for m in MODULES), "batch")
+"""Columns that depend on the machine's speed or the execution (excluded when tables
+are compared for determinism)."""
+
+# Pose-cell keys read by the pose-cell *module* only, not by its network.
+MODULE_ONLY_PC_KEYS = frozenset(
+    {"vt_active_decay", "pc_vt_inject_energy", "pc_vt_restore", "exp_delta_pc_threshold"}
+)
+
+
+def _identity(run: RunSpec, backend: str) -> dict[str, Any]:
+    return {
+        "index": run.index,
+        "run_id": run.run_id,
+        "dataset": run.dataset,
+        "max_frames": run.max_frames if run.max_frames is not None else -1,
+        "seed": run.seed,
+        "backend": backend,
+        **run.params,
+    }
+
+
+def _error_row(run: RunSpec, exc: BaseException) -> dict[str, Any]:
+    message = " ".join(str(exc).split()) or type(exc).__name__
+    row = _identity(run, run.backend or "")
+    row.update(status="error", error=f"{type(exc).__name__}: {message}")
+    row.update({k: math.nan for k in METRICS})
+    return row
+
+
+def _open(run: RunSpec) -> Any:
+    from torchratslam.readers.datasets import open_data
+
+    return open_data(run.data)
+
+
+def _odometry_for(data: Any, config: Any) -> Any:
+    """None (the config's choice) unless the data carries no odometry."""
+    if getattr(data, "has_odometry", True):
+        return None
+    from torchratslam.readers.visual_odometry import VisualOdometry
+
+    mirrored = bool(getattr(data, "mirrored", False)) or (
+        getattr(getattr(data, "camera", None), "kind", None) == "panoramic"
+    )
+    return VisualOdometry(config.visual_odometry, mirrored=mirrored)
+
+
+def _metrics(slam: Any, result: Any, data: Any, wall_s: float, batch: int) -> dict[str, Any]:
+    table = None
+    if slam.groundtruth_poses() is None and hasattr(data, "groundtruth"):
+        table = data.groundtruth()
+        if table is not None and not len(table):
+            table = None
+    ate = dr = None
+    if slam.groundtruth_poses() is not None or table is not None:
+        ate = slam.ate(table)
+        dr = slam.dead_reckoning_ate(table)
+    timings = result.timings
+    row: dict[str, Any] = {
+        "status": "ok",
+        "error": "",
+        "frames": int(result.frames),
+        "templates": int(result.templates),
+        "experiences": int(result.experiences),
+        "links": int(result.links),
+        "ate_m": math.nan if ate is None else float(ate),
+        "dead_reckoning_ate_m": math.nan if dr is None else float(dr),
+        "wall_s": float(wall_s),
+        "fps": float(result.frames / wall_s) if wall_s > 0 else 0.0,
+        "batch": int(batch),
+    }
+    for m in MODULES:
+        row[f"ms_{m}"] = float(timings.get(m, {}).get("mean_ms", math.nan))
+    return row
+
+
+def run_one(run: RunSpec) -> dict[str, Any]:
+    """Run one configuration on its dataset (exceptions propagate).
+
+    Returns:
+        The table row (identity, parameters, ``status``, ``error``, metrics).
+    """
+    from torchratslam.pipeline import RatSLAM
+
+    config = run.config()
+    data = _open(run)
+    t0 = time.perf_counter()
+    slam = RatSLAM(config, odometry=_odometry_for(data, config))
+    result = slam.run(data, max_frames=run.max_frames, progress=False)
+    wall = time.perf_counter() - t0
+    row = _identity(run, config.experience_map.exp_backend)
+    row.update(_metrics(slam, result, data, wall, 1))
+    return row
+
+
+def run_safely(run: RunSpec) -> dict[str, Any]:
+    """:func:`run_one`, with any failure recorded in the row instead of raised."""
+    try:
+        return run_one(run)
+    except Exception as exc:  # a failing run is a result of the sweep
+        log.warning("run %s failed: %s", run.run_id, exc)
+        return _error_row(run, exc)
+
+
+# ----------------------------------------------------------------- batched groups
+def batch_key(run: RunSpec) -> tuple | None:
+    """Runs with equal keys can share one batched pose-cell network (None: never).
+
+    The key holds everything that decides the frames, the odometry, the views and the
+    pose-cell *network*: the dataset, frame limit, and every config key except the
+    module-only pose-cell keys and the experience map's keys.
+    """
+    try:
+        config = run.config()
+    except Exception:
+        return None
+    if config.general.pose_cells != "ratslam":
+        return None
+    flat = config.to_flat()
+    em_keys = set(type(config.experience_map).keys())
+    shared = tuple(
+        sorted(
+            (k, repr(v))
+            for k, v in flat.items()
+            if k not in MODULE_ONLY_PC_KEYS and k not in em_keys
+        )
+    )
+    return (run.data, run.max_frames, shared)
+
+
+def shares_network(network: Any) -> bool:
+    """Whether a group may step its runs' networks as one batched network.
+
+    Only networks whose dynamics run on the whole network (``separable``, ``conv3d``)
+    give the same numbers in a batch as alone; the ``crop`` method sizes its box by the
+    widest packet of the batch, which changes the rounding of the others. Groups of
+    cropped networks still share the frames, odometry and local view.
+    """
+    return getattr(network, "method", None) in ("separable", "conv3d")
+
+
+class _SlotNetwork:
+    """Network ``b`` of a shared batched :class:`PoseCellNetwork`, as the pose-cell
+    module sees it: injections are queued until the whole batch steps, and ``step``
+    returns this network's row of the batch's packet centres."""
+
+    def __init__(self, shared: Any, b: int, dims: tuple[int, int, int]) -> None:
+        self.shared, self.b, self.dims = shared, b, dims
+        self.pending: tuple[int, int, int, float] | None = None
+        self.centre_row: Any = None
+
+    @property
+    def activity(self) -> Any:
+        return self.shared.activity[self.b : self.b + 1]
+
+    def inject(self, x: Any, y: Any, th: Any, energy: Any) -> None:
+        if self.pending is not None:
+            raise RuntimeError("two injections in one frame")  # not in RatSLAM's rules
+        self.pending = (int(x), int(y), int(th), float(energy))
+
+    def step(self, vtrans: Any, vrot: Any, dt: Any = 1.0) -> Any:
+        return self.centre_row
+
+
+class _ReplayView:
+    """A local view that hands out views computed once for a whole group."""
+
+    def __init__(self, views: list[Any], sizes: list[int], templates: Any) -> None:
+        self._views, self._sizes, self._templates = views, sizes, templates
+        self._i = 0
+
+    def process(self, observation: Any, frame_index: int | None = None) -> Any:
+        view = self._views[self._i]
+        self._i += 1
+        return view
+
+    def __len__(self) -> int:
+        return self._sizes[self._i - 1] if self._i else 0
+
+    @property
+    def templates(self) -> Any:
+        return self._templates
+
+
+class _ReplayPoseCells:
+    """A pose-cell module that hands out the actions and centres of a batched pass."""
+
+    def __init__(self, actions: list[Any], centres: list[tuple], module: Any) -> None:
+        self._actions, self._centres, self._module = actions, centres, module
+        self._i = -1
+
+    def on_view_template(self, match: Any) -> None:
+        self._i += 1
+
+    def on_odometry(self, vtrans: float, vrot: float, dt: float) -> Any:
+        return self._actions[self._i]
+
+    @property
+    def centre(self) -> tuple[float, float, float]:
+        return self._centres[self._i]
+
+    @property
+    def activity(self) -> Any:
+        return self._module.activity
+
+    def __getattr__(self, name: str) -> Any:  # state, counts: the real module's
+        return getattr(self._module, name)
+
+
+def _frames(data: Any, max_frames: int | None) -> Iterator[Any]:
+    it = iter(data.frames()) if hasattr(data, "frames") else iter(data)
+    for i, frame in enumerate(it):
+        if max_frames is not None and i >= max_frames:
+            return
+        yield frame
+
+
+def run_group(runs: Sequence[RunSpec]) -> list[dict[str, Any]]:
+    """Run several configurations that share a :func:`batch_key` as one group
+    (exceptions propagate; one row per run, in order).
+
+    The frames are read, and the odometry and local view computed, once; each frame
+    steps all ``B`` pose-cell networks in one call (when :func:`shares_network`, else
+    one by one); each run then replays its views and actions through its own
+    :class:`~torchratslam.pipeline.RatSLAM` (its own experience map).
+    """
+    import torch
+
+    from torchratslam.pipeline import RatSLAM
+    from torchratslam.pose_cells.network import PoseCellNetwork, PoseCells
+
+    if len(runs) == 1:
+        return [run_one(runs[0])]
+    configs = [r.config() for r in runs]
+    data = _open(runs[0])
+    t0 = time.perf_counter()
+    ref = RatSLAM(configs[0], odometry=_odometry_for(data, configs[0]))
+    modules = [PoseCells(c.pose_cells) for c in configs]
+    slots: list[_SlotNetwork] = []
+    shared = None
+    if shares_network(modules[0].network):
+        shared = PoseCellNetwork(configs[0].pose_cells, len(runs), method=modules[0].network.method)
+        for b, m in enumerate(modules):
+            slot = _SlotNetwork(shared, b, m.network.dims)
+            m.network = slot  # type: ignore[assignment]  # the slot steps like a network
+            slots.append(slot)
+    frames, odos, views, sizes = [], [], [], []
+    actions: list[list[Any]] = [[] for _ in runs]
+    centres: list[list[tuple]] = [[] for _ in runs]
+    t_odo = t_view = t_pc = 0.0
+    zeros = np.zeros(len(runs), dtype=np.int64)
+    for i, frame in enumerate(_frames(data, runs[0].max_frames)):
+        frames.append(frame)
+        c0 = time.perf_counter()
+        odo = tuple(float(v) for v in ref.odometry(frame))
+        c1 = time.perf_counter()
+        view = ref.local_view.process(frame.image, frame_index=i)
+        c2 = time.perf_counter()
+        odos.append(odo)
+        views.append(view)
+        sizes.append(len(ref.local_view))
+        for m in modules:
+            m.on_view_template(view)
+        if shared is not None:  # every network in one call
+            inj = [s.pending for s in slots]
+            if any(p is not None for p in inj):
+                x, y, th, e = zeros.copy(), zeros.copy(), zeros.copy(), np.zeros(len(runs))
+                for b, p in enumerate(inj):
+                    if p is not None:
+                        x[b], y[b], th[b], e[b] = p
+                        slots[b].pending = None
+                shared.inject(x, y, th, e)
+            cents = shared.step(odo[0], odo[1], odo[2])
+            for b, slot in enumerate(slots):
+                slot.centre_row = cents[b : b + 1]
+        for b, m in enumerate(modules):
+            actions[b].append(m.on_odometry(*odo))
+            c = m.centre
+            centres[b].append((float(c[0]), float(c[1]), float(c[2])))
+        c3 = time.perf_counter()
+        t_odo += c1 - c0
+        t_view += c2 - c1
+        t_pc += c3 - c2
+    shared_s = time.perf_counter() - t0
+    n = max(len(frames), 1)
+    rows = []
+    templates = ref.local_view.templates
+    for b, (run, config) in enumerate(zip(runs, configs)):
+        t1 = time.perf_counter()
+        slam = RatSLAM(
+            config,
+            local_view=_ReplayView(views, sizes, templates),
+            pose_cells=_ReplayPoseCells(actions[b], centres[b], modules[b]),
+            odometry=_ReplayOdometry(odos),  # type: ignore[arg-type]
+            dtype=torch.float32,
+        )
+        result = slam.run(frames, progress=False)
+        own = time.perf_counter() - t1
+        row = _identity(run, config.experience_map.exp_backend)
+        row.update(_metrics(slam, result, data, shared_s / len(runs) + own, len(runs)))
+        row["ms_odometry"] = t_odo / n * 1e3 / len(runs)
+        row["ms_local_view"] = t_view / n * 1e3 / len(runs)
+        row["ms_pose_cells"] = t_pc / n * 1e3 / len(runs)
+        rows.append(row)
+    return rows
+
+
+class _ReplayOdometry:
+    def __init__(self, odos: list[tuple[float, float, float]]) -> None:
+        self._odos, self._i = odos, 0
+
+    def __call__(self, frame: Any) -> tuple[float, float, float]:
+        odo = self._odos[self._i]
+        self._i += 1
+        return odo
+
+
+def run_group_safely(runs: Sequence[RunSpec]) -> list[dict[str, Any]]:
+    """:func:`run_group`; if the group fails, each run is retried alone so that only
+    the runs that fail by themselves are recorded as errors."""
+    try:
+        return run_group(runs)
+    except Exception as exc:
+        if len(runs) == 1:
+            return [_error_row(runs[0], exc)]
+        log.info("batched group failed (%s); running its %d runs one by one", exc, len(runs))
+        return [run_safely(r) for r in runs]
