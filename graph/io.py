@@ -22,10 +22,10 @@ floats, so a write/read round trip is exact.
 from __future__ import annotations
 
 import os
-import tempfile
 from pathlib import Path
 
 import numpy as np
+from torchratslam.graph.atomic import atomic_write_text
 from torchratslam.graph.errors import InputError, MapFormatError
 from torchratslam.graph.posegraph import PoseGraph, compose_odometry
 
@@ -212,20 +212,6 @@ def read_posegraph(
         return PoseGraph(poses, rows, meas, vid, info)
     except InputError as exc:
         raise MapFormatError(f"{path.name}: {exc}") from None
-
-
-def atomic_write_text(path: Path, text: str) -> None:
-    """Write ``text`` to ``path`` through a temporary file and a rename, so a crash never
-    leaves a half-written file (an existing file is replaced only by a complete one)."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "w") as fh:
-            fh.write(text)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
 
 
 def _write(pg: PoseGraph, path: str | os.PathLike, fmt: str) -> None:

@@ -4,8 +4,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
-import tempfile
 from pathlib import Path
 from typing import Any
 
@@ -154,12 +152,7 @@ def main(args: argparse.Namespace) -> int:
             }
             for r in rows
         ]
-        fd, tmp = tempfile.mkstemp(dir=out.parent, prefix=".tmp-", suffix=".json")
-        try:
-            with os.fdopen(fd, "w") as fh:
-                json.dump(payload, fh, indent=2, default=str)
-            os.replace(tmp, out)
-        finally:
-            if os.path.exists(tmp):
-                os.unlink(tmp)
+        from torchratslam.graph.atomic import atomic_write_text
+
+        atomic_write_text(out, json.dumps(payload, indent=2, default=str))
     return 0

@@ -9,15 +9,14 @@ from __future__ import annotations
 import argparse
 import inspect
 import json
-import os
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from torchratslam.graph.atomic import atomic_write_text, atomic_write_with
 from torchratslam.graph.errors import ConfigError, InputError
-from torchratslam.graph.io import atomic_write_text
 from torchratslam.messages import Frame
 
 # parameter presets: the paper's Table 3 values, and those used for the results in
@@ -247,9 +246,7 @@ def main(args: argparse.Namespace) -> int:
     atomic_write_text(out / "metrics.json", json.dumps(metrics, indent=2) + "\n")
     state = result.model.get_state()
     arrays = {k.replace("/", "__"): np.asarray(v) for k, v in state.items() if k != "params"}
-    tmp = out / ".state.tmp.npz"
-    np.savez(tmp, **arrays, node_xy=result.node_xy)
-    os.replace(tmp, out / "state.npz")
+    atomic_write_with(out / "state.npz", lambda fh: np.savez(fh, **arrays, node_xy=result.node_xy))
     if not args.no_plots:
         plot_results(result, session, out)
     m = result.metrics

@@ -17,8 +17,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
-import tempfile
 from pathlib import Path
 from typing import Any
 
@@ -88,16 +86,10 @@ def _tour_name(spec: str) -> str:
 
 def _write_json(path: Path, obj: Any) -> None:
     """Atomic JSON write (temporary file + rename)."""
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w") as fh:
-            json.dump(
-                obj, fh, indent=1, default=lambda v: v.item() if hasattr(v, "item") else str(v)
-            )
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    from torchratslam.graph.atomic import atomic_write_text
+
+    text = json.dumps(obj, indent=1, default=lambda v: v.item() if hasattr(v, "item") else str(v))
+    atomic_write_text(path, text)
 
 
 def _fmt(v: Any, spec: str = ".4g") -> str:

@@ -27,8 +27,8 @@ from typing import Any, BinaryIO
 
 import numpy as np
 
+from torchratslam.graph.atomic import write_directory_atomically
 from torchratslam.graph.errors import InputError, MapFormatError
-from torchratslam.maps._atomic import write_directory_atomically
 from torchratslam.maps.state import MapState
 
 __all__ = ["FILES", "is_reference_map", "read_reference", "write_reference"]
