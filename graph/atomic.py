@@ -234,6 +234,7 @@ def write_directory_atomically(
     except BaseException:
         shutil.rmtree(new, ignore_errors=True)
         raise
+    remove_stale_leftovers(target)
     return target
 
 
