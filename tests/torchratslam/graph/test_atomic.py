@@ -9,8 +9,6 @@ import sys
 import textwrap
 
 import pytest
-
-from torchratslam.errors import InputError
 from torchratslam.graph import atomic
 from torchratslam.graph.atomic import (
     DirectoryLock,
@@ -18,6 +16,8 @@ from torchratslam.graph.atomic import (
     atomic_write_text,
     write_directory_atomically,
 )
+
+from torchratslam.errors import InputError
 from torchratslam.maps.state import load_map, load_state, save_map
 
 from ..maps.test_state import random_map
