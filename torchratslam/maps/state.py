@@ -62,6 +62,7 @@ FORMAT_NAME = "torchratslam-map"
 FORMAT_VERSION = 1
 STATE_NPZ = "state.npz"
 STATE_JSON = "state.json"
+HISTORY_NPZ = "history.npz"
 
 # name -> (kind, ndim) ; kind "f" float, "i" integer. Shapes are cross-checked below.
 ARRAY_FIELDS: dict[str, tuple[str, int]] = {
@@ -381,7 +382,13 @@ def _json_default(value: Any) -> Any:
     raise TypeError(f"cannot store {type(value).__name__} in state.json")
 
 
-def save_map(state: MapState, directory: str | Path, *, info: dict[str, Any] | None = None) -> Path:
+def save_map(
+    state: MapState,
+    directory: str | Path,
+    *,
+    info: dict[str, Any] | None = None,
+    extra_files: dict[str, Any] | None = None,
+) -> Path:
     """Write ``state`` to ``directory`` (native format), atomically.
 
     The files are written into a temporary directory beside the target, synced, then
@@ -396,6 +403,9 @@ def save_map(state: MapState, directory: str | Path, *, info: dict[str, Any] | N
         info: JSON-able facts about the run that made the map, stored in state.json
             under ``"run"`` (e.g. ``{"partial": True, "stopped_at_frame": 120}``) and
             read back with :func:`read_map_info`; not part of the map itself.
+        extra_files: more files written in the same atomic step (name -> writer of an
+            open binary file); only ``history.npz`` (a run's per-frame history, which
+            ``torchratslam run --resume`` reads) is allowed.
 
     Returns:
         The directory written.
@@ -410,12 +420,16 @@ def save_map(state: MapState, directory: str | Path, *, info: dict[str, Any] | N
         if not target.is_dir():
             raise InputError(f"{target} exists and is not a directory; choose another path")
         found = {p.name for p in target.iterdir()}
-        if found - {STATE_NPZ, STATE_JSON}:
+        own = {STATE_NPZ, STATE_JSON, HISTORY_NPZ}
+        if found - own:
             raise InputError(
                 f"{target} exists and holds files other than a saved map "
-                f"({', '.join(sorted(found - {STATE_NPZ, STATE_JSON})[:3])}); refusing to "
+                f"({', '.join(sorted(found - own)[:3])}); refusing to "
                 "overwrite it: choose an empty or new directory"
             )
+    extra_files = dict(extra_files or {})
+    if set(extra_files) - {HISTORY_NPZ}:
+        raise InputError(f"save_map: extra files may only be {HISTORY_NPZ}")
     target.parent.mkdir(parents=True, exist_ok=True)
     arrays = state.arrays()
     meta = {
@@ -433,9 +447,8 @@ def save_map(state: MapState, directory: str | Path, *, info: dict[str, Any] | N
     def write_json(fh) -> None:
         fh.write(json.dumps(meta, indent=1, default=_json_default).encode())
 
-    return write_directory_atomically(
-        target, {STATE_NPZ: lambda fh: np.savez(fh, **arrays), STATE_JSON: write_json}
-    )
+    files = {STATE_NPZ: lambda fh: np.savez(fh, **arrays), **extra_files, STATE_JSON: write_json}
+    return write_directory_atomically(target, files)
 
 
 def _read_npz(path: Path) -> dict[str, np.ndarray]:

@@ -51,6 +51,7 @@ import numpy as np
 
 from torchratslam.graph.errors import InputError
 from torchratslam.messages import Frame
+from torchratslam.readers.limits import MAX_SPEED, MAX_TURN_RATE
 
 __all__ = [
     "IMAGE_EXTENSIONS",
@@ -72,11 +73,6 @@ VIDEO_EXTENSIONS = (".mp4", ".avi", ".mkv", ".mov", ".mpg", ".mpeg", ".webm", ".
 IRAT_IMAGE_TOPIC = "/irat_red/camera/image/compressed"
 IRAT_ODOM_TOPIC = "/irat_red/odom"
 IRAT_GROUNDTRUTH_TOPIC = "/overhead/pose"
-MAX_SPEED = 50.0
-"""Default limit (m/s) above which an odometry row is refused as implausible (180 km/h:
-above any robot or car dataset RatSLAM has been run on)."""
-MAX_TURN_RATE = 50.0
-"""Default limit (rad/s) above which an odometry row's turn rate is refused."""
 _CSV_MAX_BYTES = 1 << 31
 _log = logging.getLogger(__name__)
 
