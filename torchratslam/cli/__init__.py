@@ -126,6 +126,21 @@ def _version() -> str:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point; returns the process exit code."""
+    try:
+        code = _main(argv)
+        sys.stdout.flush()  # a closed pipe shows here, not at interpreter exit
+        return code
+    except BrokenPipeError:
+        # the reader of our output went away (``| head``): stop quietly, as cat does
+        try:
+            devnull = os.open(os.devnull, os.O_WRONLY)
+            os.dup2(devnull, sys.stdout.fileno())
+        except (OSError, ValueError):
+            pass
+        return 141
+
+
+def _main(argv: Sequence[str] | None) -> int:
     rest, opts = split_global_options(sys.argv[1:] if argv is None else list(argv))
     if opts["version"]:
         print(f"torchratslam {_version()}")
@@ -141,13 +156,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         _set_threads(os.environ.get("TORCHRATSLAM_THREADS", "1"))
         return int(args.func(args) or 0)
     except BrokenPipeError:
-        # the reader of our output went away (``| head``): stop quietly, as cat does
-        try:
-            devnull = os.open(os.devnull, os.O_WRONLY)
-            os.dup2(devnull, sys.stdout.fileno())
-        except (OSError, ValueError):
-            pass
-        return 141
+        raise
     except KeyboardInterrupt:
         print("torchratslam: interrupted", file=sys.stderr)
         return 130
