@@ -98,13 +98,17 @@ class _Lines:
         line = self.next()
         try:
             values = ast.literal_eval(line)
-        except (ValueError, SyntaxError):
+        except (ValueError, SyntaxError, TypeError, MemoryError, RecursionError):
             self.i -= 1
             raise self.error(f"expected a list like [0, 3], found {line[:40]!r}") from None
         if not isinstance(values, (list, tuple)):
             self.i -= 1
             raise self.error(f"expected a list, found {line[:40]!r}")
-        return [int(float(v)) for v in values]
+        try:
+            return [int(float(v)) for v in values]
+        except (TypeError, ValueError, OverflowError):
+            self.i -= 1
+            raise self.error(f"expected a list of ids, found {line[:40]!r}") from None
 
     def floats(self) -> np.ndarray:
         line = self.next()

@@ -547,8 +547,8 @@ def load_map(directory: str | Path) -> MapState:
         if not isinstance(v, (str, int, float, bool)) and v is not None:
             raise MapFormatError(f"{d / STATE_JSON}: config key {k!r} has a {type(v).__name__}")
     for k in ("pc_dim_xy", "pc_dim_th", "template_x_size", "template_y_size"):
-        v = meta["config"].get(k)
-        if v is not None and (not isinstance(v, int) or isinstance(v, bool) or v <= 0):
+        v = meta["config"].get(k, 1)
+        if not isinstance(v, int) or isinstance(v, bool) or v <= 0:
             raise MapFormatError(f"{d / STATE_JSON}: config {k} = {v!r} is not a positive integer")
     try:
         arrays = _read_npz(d / STATE_NPZ)
