@@ -6,7 +6,7 @@ STAMP   := $(VENV)/.installed
 TORCH   := torch==2.13.0
 OUT     ?= out
 
-.PHONY: all install demo test bench lint format clean
+.PHONY: all install demo test bench lint format clean fuzz
 
 all: test
 
@@ -27,6 +27,10 @@ demo: $(STAMP)
 
 test: $(STAMP)
 	$(BIN)/python -m pytest -q -p no:cacheprovider
+
+# Every parser fuzzed with 5000+ random examples (make test runs a fixed, smaller set).
+fuzz: $(STAMP)
+	TORCHRATSLAM_FUZZ_PROFILE=fuzz $(BIN)/python -m pytest -q -p no:cacheprovider tests/torchratslam/test_fuzz.py
 
 bench: $(STAMP)
 	$(BIN)/python -m benchmarks
