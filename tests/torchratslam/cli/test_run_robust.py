@@ -273,3 +273,33 @@ def test_global_options_anywhere_version_and_quiet_broken_pipes(setup, tmp_path,
     )
     os.close(w)
     assert "BrokenPipe" not in done.stderr and "Traceback" not in done.stderr
+
+
+def test_simulate_overwrite_removes_only_what_it_wrote(tmp_path, capsys):
+    out = tmp_path / "ds"
+    argv = ["simulate", "sim:loop?laps=0.1&frames=4", "--out", str(out), "--quiet"]
+    assert main(argv) == 0
+    (out / "notes.txt").write_text("mine")
+    assert main([*argv, "--overwrite"]) == 2
+    assert "did not write (notes.txt)" in capsys.readouterr().err
+    assert (out / "notes.txt").read_text() == "mine" and (out / "odometry.csv").is_file()
+    (out / "notes.txt").unlink()
+    assert main([*argv, "--overwrite"]) == 0
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["ds"]  # no leftovers beside it
+
+
+def test_a_read_only_out_is_refused_before_the_work(setup, tmp_path, monkeypatch, capsys):
+    _, cfg, data, _ = setup
+    out = tmp_path / "ro"
+    out.mkdir()
+    if os.geteuid() != 0:  # a real read-only directory
+        out.chmod(0o555)
+    else:  # root may write anywhere: the OS reports a read-only directory the same way
+        real = os.access
+        monkeypatch.setattr(os, "access", lambda p, m: False if str(p) == str(out) else real(p, m))
+    try:
+        assert main(_argv(cfg, data, out)) == 2
+        assert f"--out {out}: {out} is not writable" in capsys.readouterr().err
+    finally:
+        out.chmod(0o755)
+    assert list(out.iterdir()) == []

@@ -135,3 +135,25 @@ def test_manifest_overwrite_removes_only_recorded_files(tmp_path):
         ".torchratslam-manifest.json",
         "notes.txt",
     ]
+
+
+def test_two_writers_of_one_file_never_collide_on_a_temporary_name(tmp_path):
+    import threading
+
+    errors = []
+
+    def write(tag):
+        try:
+            for _ in range(30):
+                atomic_write_text(tmp_path / "pose_cells.png", tag * 1000)
+        except Exception as exc:  # a shared temporary name fails here
+            errors.append(exc)
+
+    threads = [threading.Thread(target=write, args=(t,)) for t in "ab"]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    assert not errors
+    assert (tmp_path / "pose_cells.png").read_text() in ("a" * 1000, "b" * 1000)
+    assert [p.name for p in tmp_path.iterdir()] == ["pose_cells.png"]
