@@ -336,6 +336,7 @@ def check_config_limits(config: RatSLAMConfig, *, memory_bytes: int | None = Non
 
 
 def _size(n: float) -> str:
+    n = float(n) if n < 1e300 else float("inf")
     for unit in ("B", "KB", "MB", "GB", "TB", "PB"):
         if n < 1000 or unit == "PB":
             return f"{n:.3g} {unit}"

@@ -46,7 +46,7 @@ _COMMON = {
     "suppress_health_check": list(HealthCheck),
     "database": None,
 }
-settings.register_profile("fuzz-quick", max_examples=120, derandomize=True, **_COMMON)
+settings.register_profile("fuzz-quick", max_examples=300, derandomize=True, **_COMMON)
 settings.register_profile("fuzz", max_examples=5000, **_COMMON)
 FUZZ = settings.get_profile(os.environ.get("TORCHRATSLAM_FUZZ_PROFILE", "fuzz-quick"))
 PEAK_BYTES = 64 << 20

@@ -541,8 +541,17 @@ def load_map(directory: str | Path) -> MapState:
             raise MapFormatError(f"{d / STATE_JSON}: missing or malformed {key!r} section")
     declared: dict[str, Any] = meta["arrays"]
     for k, spec in declared.items():
-        if not isinstance(spec, dict):
-            raise MapFormatError(f"{d / STATE_JSON}: array entry {k!r} is not a mapping")
+        shape = spec.get("shape") if isinstance(spec, dict) else None
+        if (
+            not isinstance(spec, dict)
+            or not isinstance(shape, list)
+            or not all(isinstance(v, int) and not isinstance(v, bool) for v in shape)
+            or not isinstance(spec.get("dtype"), str)
+        ):
+            raise MapFormatError(
+                f"{d / STATE_JSON}: array entry {k!r} is not a mapping with a shape (a list "
+                "of integers) and a dtype"
+            )
     for k, v in meta["config"].items():
         if not isinstance(v, (str, int, float, bool)) and v is not None:
             raise MapFormatError(f"{d / STATE_JSON}: config key {k!r} has a {type(v).__name__}")
