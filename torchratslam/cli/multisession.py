@@ -23,6 +23,7 @@ from typing import Any
 import numpy as np
 
 from torchratslam.config import load_config
+from torchratslam.graph.atomic import atomic_write_text
 
 SESSION_COLOURS = ("tab:blue", "gold", "tab:green", "tab:purple", "tab:orange", "tab:cyan")
 
@@ -86,8 +87,6 @@ def _tour_name(spec: str) -> str:
 
 def _write_json(path: Path, obj: Any) -> None:
     """Atomic JSON write (temporary file + rename)."""
-    from torchratslam.graph.atomic import atomic_write_text
-
     text = json.dumps(obj, indent=1, default=lambda v: v.item() if hasattr(v, "item") else str(v))
     atomic_write_text(path, text)
 
@@ -197,6 +196,8 @@ def write_figures(result: dict[str, Any], out: Path) -> list[Path]:
     matplotlib.use("Agg", force=False)
     import matplotlib.pyplot as plt
 
+    from torchratslam.viz.plots import save_figure
+
     data, report = result["data"], result["report"]
     multi = data["multi"]
     bounds = np.asarray(data["session_starts"], np.float64)
@@ -212,8 +213,7 @@ def write_figures(result: dict[str, Any], out: Path) -> list[Path]:
         ax.legend(fontsize=7, loc="best")
         fig.tight_layout()
         p = out / name
-        fig.savefig(p, dpi=100)
-        plt.close(fig)
+        save_figure(fig, p, dpi=100, tight=False)
         paths.append(p)
 
     fig, ax = plt.subplots(figsize=(5, 5))
@@ -346,7 +346,7 @@ def run(
     report["seed"] = seed
     report["config"] = config.to_flat()
     _write_json(out / "report.json", report)
-    (out / "report.md").write_text(report_markdown(report))
+    atomic_write_text(out / "report.md", report_markdown(report))
     if figures:
         report["figures"] = [p.name for p in write_figures(result, out)]
         _write_json(out / "report.json", report)

@@ -27,15 +27,17 @@ from torchratslam.eval.metrics import align_se2
 __all__ = ["plot_map", "plot_pose_cells", "save_figure"]
 
 
-def save_figure(fig: Any, path: str | Path, dpi: int = 110) -> Path:
-    """Save a matplotlib figure atomically (temp file + rename) and close it."""
+def save_figure(fig: Any, path: str | Path, dpi: int = 110, *, tight: bool = True) -> Path:
+    """Save a matplotlib figure atomically (temp file + rename) and close it
+    (``tight``: ``bbox_inches="tight"``)."""
     from torchratslam.graph.atomic import atomic_write_with
 
     path = Path(path)
     fmt = (path.suffix or ".png").lstrip(".")
     try:
         atomic_write_with(
-            path, lambda fh: fig.savefig(fh, dpi=dpi, bbox_inches="tight", format=fmt)
+            path,
+            lambda fh: fig.savefig(fh, dpi=dpi, bbox_inches="tight" if tight else None, format=fmt),
         )
     finally:
         plt.close(fig)
