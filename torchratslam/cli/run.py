@@ -282,6 +282,7 @@ def _save_state(slam: Any, out: Path, record: dict[str, Any], info: dict[str, An
     from torchratslam.graph.atomic import Manifest, atomic_write_text
     from torchratslam.maps.state import save_map, state_from_slam
 
+    Manifest(out).add([STATE_DIR, RUN_RECORD])  # recorded before they are written
     save_map(
         state_from_slam(slam),
         out / STATE_DIR,
@@ -289,7 +290,6 @@ def _save_state(slam: Any, out: Path, record: dict[str, Any], info: dict[str, An
         extra_files={HISTORY: _history_writer(slam)},
     )
     atomic_write_text(out / RUN_RECORD, json.dumps(record, indent=1, default=_json_default))
-    Manifest(out).add([STATE_DIR, RUN_RECORD])
 
 
 def write_outputs(
