@@ -444,10 +444,17 @@ def _check_applicable(opts: dict[str, Any]) -> None:
     error, not a silent no-op."""
     kind = _data_kind(str(opts["data"]))
     wrong = {
-        "sim": ("odometry", "groundtruth", "image_topic", "odom_topic"),
+        "sim": (
+            "odometry",
+            "groundtruth",
+            "image_topic",
+            "odom_topic",
+            "max_speed",
+            "max_turn_rate",
+        ),
         "directory": ("image_topic", "odom_topic"),
         "video": ("image_topic", "odom_topic"),
-        "bag": ("odometry", "groundtruth"),
+        "bag": ("odometry", "groundtruth", "max_speed", "max_turn_rate"),
     }[kind]
     given = [f"--{k.replace('_', '-')}" for k in wrong if opts.get(k)]
     if given:
