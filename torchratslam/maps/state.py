@@ -36,7 +36,9 @@ import json
 import logging
 import math
 import re
+import struct
 import zipfile
+import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -570,7 +572,18 @@ def load_map(directory: str | Path) -> MapState:
             )
     except MapFormatError:
         raise
-    except (zipfile.BadZipFile, EOFError, OSError, ValueError, KeyError, TypeError) as exc:
+    except (
+        zipfile.BadZipFile,
+        zlib.error,
+        struct.error,
+        EOFError,
+        OSError,
+        ValueError,
+        KeyError,
+        TypeError,
+        NotImplementedError,  # a member with an unknown compression method
+        RuntimeError,  # an "encrypted" member
+    ) as exc:
         raise MapFormatError(
             f"{d / STATE_NPZ} cannot be read ({type(exc).__name__}: {exc}); "
             "the file is corrupt or truncated"
