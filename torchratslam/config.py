@@ -307,7 +307,8 @@ def check_config_limits(config: RatSLAMConfig, *, memory_bytes: int | None = Non
 
     * every crop's end (when not -1) lies after its start;
     * the pose-cell network (``pc_dim_xy**2 * pc_dim_th`` cells, a few float copies)
-      fits in ``memory_bytes`` (default: the machine's physical memory).
+      and one template (``template_x_size * template_y_size``) fit in ``memory_bytes``
+      (default: the machine's physical memory).
 
     Raises:
         ConfigError: naming the keys, their values and the limit.
@@ -332,6 +333,13 @@ def check_config_limits(config: RatSLAMConfig, *, memory_bytes: int | None = Non
         raise ConfigError(
             f"pc_dim_xy = {xy}, pc_dim_th = {th}: the pose-cell network needs about "
             f"{_size(need)}, more than this machine's {_size(memory_bytes)}; lower pc_dim_xy"
+        )
+    tx, ty = int(flat["template_x_size"]), int(flat["template_y_size"])
+    one = tx * ty * 8 * 4  # one template and the working copies of a comparison
+    if memory_bytes and one > memory_bytes:
+        raise ConfigError(
+            f"template_x_size = {tx}, template_y_size = {ty}: one template needs about "
+            f"{_size(one)}, more than this machine's {_size(memory_bytes)}; lower them"
         )
 
 

@@ -58,6 +58,8 @@ def test_sizes_that_cannot_fit_and_crossed_crops_are_refused_before_the_work():
     with pytest.raises(ConfigError, match=r"pc_dim_xy = 100000.*needs about .*TB"):
         check_config_limits(load_config(None, pc_dim_xy=100000))
     check_config_limits(load_config("virtual_tour"))
+    with pytest.raises(ConfigError, match="one template needs about"):
+        check_config_limits(load_config(None, template_x_size=10**6, template_y_size=10**6))
     with pytest.raises(ConfigError, match="vrot_image_y_max = 3 must be > vrot_image_y_min = 5"):
         check_config_limits(load_config(None, vrot_image_y_min=5, vrot_image_y_max=3))
 
