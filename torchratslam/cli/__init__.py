@@ -31,6 +31,7 @@ import re
 import sys
 import traceback
 from collections.abc import Sequence
+from typing import Any
 
 from torchratslam.graph.errors import ConfigError, RatSLAMError
 
@@ -102,12 +103,24 @@ def split_global_options(argv: Sequence[str]) -> tuple[list[str], dict[str, int]
     return rest, found
 
 
+class _StderrHandler(logging.StreamHandler):
+    """Writes to whatever ``sys.stderr`` is when a record comes (tests replace it)."""
+
+    @property  # type: ignore[override]
+    def stream(self) -> Any:
+        return sys.stderr
+
+    @stream.setter
+    def stream(self, value: Any) -> None:
+        pass
+
+
 def _setup_logging(verbose: int, quiet: int) -> None:
     level = {-2: logging.CRITICAL + 1, -1: logging.ERROR, 0: logging.WARNING, 1: logging.INFO}
     log = logging.getLogger("torchratslam")
     log.setLevel(level.get(max(-2, min(verbose - quiet, 2)), logging.DEBUG))
     if not any(getattr(h, "_torchratslam_cli", False) for h in log.handlers):
-        handler = logging.StreamHandler(sys.stderr)
+        handler = _StderrHandler()
         handler.setFormatter(logging.Formatter("torchratslam: %(message)s"))
         handler._torchratslam_cli = True  # type: ignore[attr-defined]
         log.addHandler(handler)
