@@ -224,3 +224,18 @@ def test_ground_truth_in_another_time_base_is_detected(tmp_path, caplog):
         r = DirectoryReader(d)
     assert "ground truth covers 2 of 3 frames" in caplog.text
     assert [f.pose is None for f in r] == [False, False, True]
+
+
+def test_a_video_with_visual_odometry_and_ground_truth_in_another_time_base(tmp_path):
+    video = tmp_path / "v.avi"
+    w = cv2.VideoWriter(str(video), cv2.VideoWriter_fourcc(*"MJPG"), 5.0, (32, 24), False)
+    for k in range(6):
+        w.write(np.full((24, 32), 20 * k, np.uint8))
+    w.release()
+    gt = tmp_path / "gt.csv"  # Unix times, while the video's frame times run from 0 s
+    gt.write_text("t,x,y,theta\n1300000000,0,0,0\n1300000002,1,0,0\n")
+    with pytest.raises(InputError, match=r"ground-truth times \[1\.3e\+09, .*different time bases"):
+        open_data(video, groundtruth=gt)
+    gt.write_text("t,x,y,theta\n0,0,0,0\n1,1,0,0\n")  # the same base: matched by time
+    r = open_data(video, groundtruth=gt)
+    assert [round(f.pose[0], 6) for f in r] == [0.0, 0.2, 0.4, 0.6, 0.8, 1.0]
