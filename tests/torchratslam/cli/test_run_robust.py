@@ -303,3 +303,21 @@ def test_a_read_only_out_is_refused_before_the_work(setup, tmp_path, monkeypatch
     finally:
         out.chmod(0o755)
     assert list(out.iterdir()) == []
+
+
+def test_a_run_killed_during_a_checkpoint_resumes_to_the_uninterrupted_map(setup, tmp_path):
+    _, cfg, data, full = setup
+    out = tmp_path / "out"
+    env = {**os.environ, "TORCHRATSLAM_CRASH_AT": "16"}  # inside the second checkpoint's save
+    argv = _argv(cfg, data, out)[1:]
+    done = subprocess.run(
+        [sys.executable, "-m", "torchratslam", "run", *argv, "--checkpoint-every", "10"],
+        env=env,
+        capture_output=True,
+        text=True,
+    )
+    assert done.returncode == 86, done.stderr[-2000:]  # killed, nothing ran after
+    info = read_map_info(out / "state")
+    assert info["partial"] and info["stopped_at_frame"] in (10, 20)
+    assert main(["run", "--resume", str(out), "--no-progress"]) == 0
+    _same_run(full, out)
