@@ -365,9 +365,9 @@ def to_openratslam_txt(config: RatSLAMConfig, *, comment: str = "") -> str:
 
 
 def check_config_limits(config: RatSLAMConfig, *, memory_bytes: int | None = None) -> None:
-    """Checks across fields and against the machine, made before any work.
+    """Checks against the machine, made before any work (the checks across fields run
+    when the config is made):
 
-    * every crop's end (when not -1) lies after its start;
     * the pose-cell network (``pc_dim_xy**2 * pc_dim_th`` cells, a few float copies)
       and one template (``template_x_size * template_y_size``) fit in ``memory_bytes``
       (default: the machine's physical memory).
@@ -376,17 +376,6 @@ def check_config_limits(config: RatSLAMConfig, *, memory_bytes: int | None = Non
         ConfigError: naming the keys, their values and the limit.
     """
     flat = config.to_flat()
-    for a, b in (
-        ("image_crop_x_min", "image_crop_x_max"),
-        ("image_crop_y_min", "image_crop_y_max"),
-        ("vtrans_image_x_min", "vtrans_image_x_max"),
-        ("vtrans_image_y_min", "vtrans_image_y_max"),
-        ("vrot_image_x_min", "vrot_image_x_max"),
-        ("vrot_image_y_min", "vrot_image_y_max"),
-    ):
-        lo, hi = flat.get(a), flat.get(b)
-        if lo is not None and hi is not None and hi != -1 and hi <= lo:
-            raise ConfigError(f"{b} = {hi} must be > {a} = {lo} (or -1 for the image edge)")
     if memory_bytes is None:
         memory_bytes = _physical_memory()
     xy, th = int(flat["pc_dim_xy"]), int(flat["pc_dim_th"])
