@@ -56,6 +56,7 @@ __all__ = [
     "load_map",
     "load_state",
     "read_map_info",
+    "recover_save",
     "save_map",
     "save_state",
 ]
@@ -632,9 +633,10 @@ def _complete(d: Path) -> bool:
     return True
 
 
-def _recover(p: Path) -> None:
+def recover_save(p: Path) -> None:
     """Put back a map an interrupted save left beside its target (``.state.new-*`` or
-    ``.state.old-*``), saying so; ``p`` is the map directory or a run's OUT."""
+    ``.state.old-*``), saying so; ``p`` is the map directory or a run's OUT. The loaders
+    call it first."""
     for target in (p, p / "state") if p.is_dir() else (p,):
         if target.exists() or target.name == "":
             continue
@@ -660,7 +662,7 @@ def load_state(path: str | Path, config: Any = None) -> MapState:
         MapFormatError: the map is corrupt or incompatible with ``config``.
     """
     p = Path(path)
-    _recover(p)
+    recover_save(p)
     if not p.exists():
         raise InputError(
             f"map {str(p)!r} not found: give a saved state directory, a run's OUT "
