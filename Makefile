@@ -9,7 +9,7 @@ OUT     ?= out
 # configs/), as symlinks, for mypy and lint-imports, which cannot follow package-dir.
 VIEW    := build/lint
 
-.PHONY: all install demo test bench lint lint-view format clean docs notebooks
+.PHONY: all install demo test bench lint lint-view format clean docs notebooks fuzz
 
 all: test
 
@@ -30,6 +30,10 @@ demo: $(STAMP)
 
 test: $(STAMP)
 	$(BIN)/python -m pytest -q -p no:cacheprovider
+
+# Every parser fuzzed with 5000+ random examples (make test runs a fixed, smaller set).
+fuzz: $(STAMP)
+	TORCHRATSLAM_FUZZ_PROFILE=fuzz $(BIN)/python -m pytest -q -p no:cacheprovider tests/torchratslam/test_fuzz.py
 
 bench: $(STAMP)
 	$(BIN)/python -m benchmarks

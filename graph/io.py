@@ -22,10 +22,10 @@ floats, so a write/read round trip is exact.
 from __future__ import annotations
 
 import os
-import tempfile
 from pathlib import Path
 
 import numpy as np
+from torchratslam.graph.atomic import atomic_write_text
 from torchratslam.graph.errors import InputError, MapFormatError
 from torchratslam.graph.posegraph import PoseGraph, compose_odometry
 
@@ -109,25 +109,28 @@ def read_posegraph(
     edges: list[list[str]] = []
     where: list[int] = []
     tags: set[str] = set()
-    with path.open() as fh:
-        for lineno, line in enumerate(fh, 1):
-            tok = line.split()
-            if not tok or tok[0].startswith("#"):
-                continue
-            tag = tok[0]
-            if tag in _IGNORED_TAGS:
-                continue
-            if tag in _VERTEX_TAGS:
-                vertices.append(tok)
-            elif tag in _EDGE_TAGS:
-                edges.append(tok)
-                where.append(lineno)
-            else:
-                raise MapFormatError(
-                    f"{path.name}:{lineno}: unsupported record {tag!r}; only 2D pose graphs "
-                    "(VERTEX_SE2/EDGE_SE2, VERTEX2/EDGE2, EQUIV) are read"
-                )
-            tags.add(tag)
+    try:
+        text = path.read_text()
+    except UnicodeDecodeError as exc:
+        raise MapFormatError(f"{path.name}: not a text file ({exc.reason})") from None
+    for lineno, line in enumerate(text.split("\n"), 1):
+        tok = line.split()
+        if not tok or tok[0].startswith("#"):
+            continue
+        tag = tok[0]
+        if tag in _IGNORED_TAGS:
+            continue
+        if tag in _VERTEX_TAGS:
+            vertices.append(tok)
+        elif tag in _EDGE_TAGS:
+            edges.append(tok)
+            where.append(lineno)
+        else:
+            raise MapFormatError(
+                f"{path.name}:{lineno}: unsupported record {tag!r}; only 2D pose graphs "
+                "(VERTEX_SE2/EDGE_SE2, VERTEX2/EDGE2, EQUIV) are read"
+            )
+        tags.add(tag)
     if not edges and not vertices:
         raise MapFormatError(f"{path.name}: no VERTEX or EDGE lines: is this a 2D pose graph?")
     if format is None:
@@ -147,18 +150,44 @@ def read_posegraph(
             raise MapFormatError(f"{path.name}: malformed {what} line{line}: {exc}") from None
         return out
 
+    def vertex_ids(ids: np.ndarray, what: str) -> np.ndarray:
+        """Integer ids, refused when not whole, not finite, negative or beyond 2**53."""
+        bad = ~np.isfinite(ids) | (ids != np.round(ids)) | (ids < 0) | (ids > 2.0**53)
+        if bad.any():
+            i = int(np.flatnonzero(bad.reshape(len(ids), -1).any(axis=1))[0])
+            line = f":{where[i]}" if what == "edge" else ""
+            raise MapFormatError(
+                f"{path.name}{line}: {what} vertex id {ids.reshape(len(ids), -1)[i].tolist()} "
+                "is not a non-negative integer"
+            )
+        return ids.astype(np.int64)
+
+    def chain_size(ids: np.ndarray) -> int:
+        """Vertices of a file without VERTEX lines: ids 0..N-1 joined by odometry edges;
+        an id beyond the number of edges cannot be reached (and must not size arrays)."""
+        n = int(ids.max()) + 1 if ids.size else 0
+        if n > len(edges) + 1:
+            raise MapFormatError(
+                f"{path.name}: an edge names vertex {n - 1} but the file has {len(edges)} "
+                "edges and no VERTEX lines; vertex ids must run 0..N-1 along the odometry"
+            )
+        return n
+
     if format == "city":
         if not all(_is_city_edge(t) for t in edges):
             bad = next(i for i, t in enumerate(edges) if not _is_city_edge(t))
             raise MapFormatError(
                 f"{path.name}:{where[bad]}: not a city10000 edge 'EDGE2 s 1 t 0 n x y th ...'"
             )
-        ends = floats([[t[1], t[3]] for t in edges], slice(0, 2), "edge").astype(np.int64)
+        ends = vertex_ids(floats([[t[1], t[3]] for t in edges], slice(0, 2), "edge"), "edge")
         meas = floats(edges, slice(6, 9), "edge")
         info = np.broadcast_to(np.diag(1.0 / np.square(CITY_SIGMAS)), (len(edges), 3, 3)).copy()
-        n = int(ends.max()) + 1
-        poses = compose_odometry(n, ends, meas)
-        return PoseGraph(poses, ends, meas, np.arange(n), info)
+        n = chain_size(ends)
+        try:
+            poses = compose_odometry(n, ends, meas)
+            return PoseGraph(poses, ends, meas, np.arange(n), info)
+        except InputError as exc:
+            raise MapFormatError(f"{path.name}: {exc}") from None
 
     if edges:
         lengths = {len(t) for t in edges}
@@ -168,10 +197,7 @@ def read_posegraph(
                 f"{path.name}:{where[bad]}: an edge has {len(edges[bad])} fields; expected "
                 "'TAG id1 id2 dx dy dth' plus 6 information entries"
             )
-        ids12 = floats(edges, slice(1, 3), "edge")
-        if not np.all(ids12 == np.round(ids12)):
-            raise MapFormatError(f"{path.name}: edge vertex ids must be integers")
-        ids12 = ids12.astype(np.int64)
+        ids12 = vertex_ids(floats(edges, slice(1, 3), "edge"), "edge")
         meas = floats([t[:6] for t in edges], slice(3, 6), "edge")
         info = np.broadcast_to(np.eye(3), (len(edges), 3, 3)).copy()
         full = np.array([len(t) == 12 for t in edges])
@@ -186,7 +212,7 @@ def read_posegraph(
     if vertices:
         if any(len(t) != 5 for t in vertices):
             raise MapFormatError(f"{path.name}: a vertex line is not 'TAG id x y th'")
-        vid = floats(vertices, slice(1, 2), "vertex")[:, 0].astype(np.int64)
+        vid = vertex_ids(floats(vertices, slice(1, 2), "vertex")[:, 0], "a")
         poses = floats(vertices, slice(2, 5), "vertex")
         if len(np.unique(vid)) != len(vid):
             raise MapFormatError(f"{path.name}: duplicate vertex ids")
@@ -202,30 +228,17 @@ def read_posegraph(
             )
         rows = order[pos]
     else:
-        n = int(ids12.max()) + 1
+        n = chain_size(ids12)
         vid = np.arange(n)
         rows = ids12
-        poses = compose_odometry(n, ids12, meas)
     try:
+        if not vertices:
+            poses = compose_odometry(n, ids12, meas)
         if initial == "odometry" and vertices:
             poses = compose_odometry(len(vid), rows, meas, start=poses[0])
         return PoseGraph(poses, rows, meas, vid, info)
     except InputError as exc:
         raise MapFormatError(f"{path.name}: {exc}") from None
-
-
-def atomic_write_text(path: Path, text: str) -> None:
-    """Write ``text`` to ``path`` through a temporary file and a rename, so a crash never
-    leaves a half-written file (an existing file is replaced only by a complete one)."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "w") as fh:
-            fh.write(text)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
 
 
 def _write(pg: PoseGraph, path: str | os.PathLike, fmt: str) -> None:

@@ -44,6 +44,7 @@ __all__ = [
     "PoseCellParams",
     "RatSLAMConfig",
     "VisualOdometryParams",
+    "check_config_limits",
     "load_config",
     "param",
 ]
@@ -240,17 +241,33 @@ class RatSLAMConfig:
         return self.from_flat({**self.to_flat(), **changes}, source="replace()")
 
 
+def _read_text(path: Path) -> str:
+    try:
+        return path.read_text()
+    except UnicodeDecodeError as exc:
+        raise ConfigError(f"{path}: not a text file ({exc})") from None
+    except OSError as exc:
+        raise InputError(f"{path}: cannot be read ({exc.strerror or exc})") from None
+
+
 def _read_yaml(path: Path) -> dict[str, Any]:
     try:
-        data = yaml.safe_load(path.read_text())
-    except yaml.YAMLError as exc:
-        raise ConfigError(f"{path}: not valid YAML ({exc})") from None
+        data = yaml.safe_load(_read_text(path))
+    except (yaml.YAMLError, RecursionError) as exc:
+        one_line = " ".join(str(exc).split())
+        raise ConfigError(f"{path}: not valid YAML ({one_line})") from None
     if data is None:
         return {}
     if not isinstance(data, dict):
         raise ConfigError(
             f"{path}: expected a mapping of parameter keys, got {type(data).__name__}"
         )
+    for key in data:
+        if not isinstance(key, str):
+            raise ConfigError(
+                f"{path}: key {key!r} ({type(key).__name__}) is not a parameter name; keys "
+                "are names such as pc_dim_xy"
+            )
     return data
 
 
@@ -265,9 +282,10 @@ def _read_openratslam_txt(path: Path) -> dict[str, Any]:
     )
     parser.optionxform = str  # type: ignore[assignment,method-assign]  # keep key case
     try:
-        parser.read_string(path.read_text())
+        parser.read_string(_read_text(path))
     except configparser.Error as exc:
-        raise ConfigError(f"{path}: not a valid OpenRatSLAM config ({exc})") from None
+        one_line = " ".join(str(exc).split())
+        raise ConfigError(f"{path}: not a valid OpenRatSLAM config ({one_line})") from None
     flat: dict[str, Any] = {}
     for section in ("general", "ratslam", "visual_odometry"):
         if parser.has_section(section):
@@ -304,9 +322,17 @@ def load_config(path: str | Path | None = None, **overrides: Any) -> RatSLAMConf
         raise InputError(
             f"config file {str(path)!r} not found (shipped configs: {', '.join(shipped)})"
         )
+    if p.is_dir():
+        raise InputError(f"config {str(path)!r} is a directory; give a .yaml or .txt file")
     flat = _read_yaml(p) if p.suffix.lower() in (".yaml", ".yml") else _read_openratslam_txt(p)
-    flat.update(overrides)
-    return RatSLAMConfig.from_flat(flat, source=str(p))
+    try:
+        return RatSLAMConfig.from_flat({**flat, **overrides}, source=str(p))
+    except ConfigError:
+        if not overrides:
+            raise
+    # something is wrong: name the file when the file alone is wrong, else the overrides
+    RatSLAMConfig.from_flat(flat, source=str(p))
+    return RatSLAMConfig.from_flat({**flat, **overrides}, source="overrides (--set)")
 
 
 def to_openratslam_txt(config: RatSLAMConfig, *, comment: str = "") -> str:
@@ -336,3 +362,51 @@ def to_openratslam_txt(config: RatSLAMConfig, *, comment: str = "") -> str:
     for name, entries in sections.items():
         lines += [f"[{name}]", *entries, ""]
     return "\n".join(lines)
+
+
+def check_config_limits(config: RatSLAMConfig, *, memory_bytes: int | None = None) -> None:
+    """Checks against the machine, made before any work (the checks across fields run
+    when the config is made):
+
+    * the pose-cell network (``pc_dim_xy**2 * pc_dim_th`` cells, a few float copies)
+      and one template (``template_x_size * template_y_size``) fit in ``memory_bytes``
+      (default: the machine's physical memory).
+
+    Raises:
+        ConfigError: naming the keys, their values and the limit.
+    """
+    flat = config.to_flat()
+    if memory_bytes is None:
+        memory_bytes = _physical_memory()
+    xy, th = int(flat["pc_dim_xy"]), int(flat["pc_dim_th"])
+    need = xy * xy * th * 8 * 4  # activity + excitation/inhibition buffers, float64 worst case
+    if memory_bytes and need > memory_bytes:
+        raise ConfigError(
+            f"pc_dim_xy = {xy}, pc_dim_th = {th}: the pose-cell network needs about "
+            f"{_size(need)}, more than this machine's {_size(memory_bytes)}; lower pc_dim_xy"
+        )
+    tx, ty = int(flat["template_x_size"]), int(flat["template_y_size"])
+    one = tx * ty * 8 * 4  # one template and the working copies of a comparison
+    if memory_bytes and one > memory_bytes:
+        raise ConfigError(
+            f"template_x_size = {tx}, template_y_size = {ty}: one template needs about "
+            f"{_size(one)}, more than this machine's {_size(memory_bytes)}; lower them"
+        )
+
+
+def _size(n: float) -> str:
+    n = float(n) if n < 1e300 else float("inf")
+    for unit in ("B", "KB", "MB", "GB", "TB", "PB"):
+        if n < 1000 or unit == "PB":
+            return f"{n:.3g} {unit}"
+        n /= 1000
+    return f"{n:.3g} PB"  # pragma: no cover
+
+
+def _physical_memory() -> int:
+    import os
+
+    try:
+        return int(os.sysconf("SC_PAGE_SIZE")) * int(os.sysconf("SC_PHYS_PAGES"))
+    except (ValueError, OSError, AttributeError):
+        return 0

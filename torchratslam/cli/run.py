@@ -6,7 +6,8 @@ import argparse
 from pathlib import Path
 from typing import Any
 
-from torchratslam.graph.errors import ConfigError
+from torchratslam.graph.errors import ConfigError, InputError
+from torchratslam.readers.limits import MAX_SPEED, MAX_TURN_RATE
 
 DESCRIPTION = """Run RatSLAM on a dataset.
 
@@ -15,7 +16,15 @@ mean/median ms per frame, ate_rmse_m when there is ground truth), experiences.cs
 (id,x,y,th,created_frame; final poses), trajectory.csv (frame,t,experience_id,x,y,th:
 the experience current after each frame, with its final pose), map.png,
 pose_cells.png and the saved map state in OUT/state (load it with --load or
-torchratslam.maps.state.load_state)."""
+torchratslam.maps.state.load_state).
+
+Everything that can be checked is checked before the first frame (OUT, the data's
+counts, the device, the config's limits). One run writes to an OUT at a time (a lock).
+When the run stops early (Ctrl-C, a bad frame, any error after frame N), the map as of
+frame N is saved in OUT/state, marked partial (metrics.json "partial": true,
+"stopped_at_frame": N), and the command exits non-zero; `run --resume OUT` continues it
+and ends with the map an uninterrupted run makes, bit for bit. Files in OUT that
+torchratslam did not write are never replaced."""
 
 EPILOG = """examples:
   torchratslam run --config configs/virtual_tour.yaml --data sim:virtual_tour --out out/vt
@@ -38,14 +47,12 @@ def register(subparsers: Any) -> argparse.ArgumentParser:
     )
     p.add_argument(
         "--config",
-        required=True,
         metavar="CONFIG",
         help="a YAML of configs/ (path or name, e.g. 'virtual_tour') or an OpenRatSLAM "
         ".txt config, e.g. --config configs/irat.yaml",
     )
     p.add_argument(
         "--data",
-        required=True,
         metavar="DATA",
         help="dataset: a directory (frames/, odometry.csv, groundtruth.csv), a video "
         "(with --odometry), a ROS 1 .bag, a ROS 2 bag directory (sqlite3 or MCAP), or "
@@ -53,7 +60,6 @@ def register(subparsers: Any) -> argparse.ArgumentParser:
     )
     p.add_argument(
         "--out",
-        required=True,
         metavar="OUT",
         help="output directory (created; files in it are replaced), e.g. --out out/vt",
     )
@@ -77,7 +83,8 @@ def register(subparsers: Any) -> argparse.ArgumentParser:
     p.add_argument(
         "--groundtruth",
         metavar="FILE",
-        help="ground-truth CSV (t,x,y,theta) for a video, e.g. --groundtruth gt.csv",
+        help="ground-truth CSV (t,x,y,theta) for a video, or to replace a directory's "
+        "groundtruth.csv, e.g. --groundtruth gt.csv",
     )
     p.add_argument(
         "--visual-odometry",
@@ -164,6 +171,37 @@ def register(subparsers: Any) -> argparse.ArgumentParser:
         "scale.png (per-module ms per frame and map size for each tenth of the run, peak "
         "memory, last tenth / first tenth), e.g. --scale-report",
     )
+    p.add_argument(
+        "--checkpoint-every",
+        type=int,
+        default=None,
+        metavar="K",
+        help="save a loadable (partial) map in OUT/state every K frames, "
+        "e.g. --checkpoint-every 500",
+    )
+    p.add_argument(
+        "--resume",
+        default=None,
+        metavar="OUT",
+        help="continue a run that stopped early, with its recorded options; the final map is "
+        "the one an uninterrupted run makes, e.g. --resume out/vt",
+    )
+    p.add_argument(
+        "--max-speed",
+        type=float,
+        default=None,
+        metavar="M_PER_S",
+        help=f"odometry rows faster than this are an error (default {MAX_SPEED:g} m/s), "
+        "e.g. --max-speed 30",
+    )
+    p.add_argument(
+        "--max-turn-rate",
+        type=float,
+        default=None,
+        metavar="RAD_PER_S",
+        help=f"odometry rows turning faster than this are an error (default {MAX_TURN_RATE:g} "
+        "rad/s), e.g. --max-turn-rate 10",
+    )
     p.set_defaults(func=main)
     return p
 
@@ -186,8 +224,38 @@ def _overrides(items: list[str]) -> dict[str, str]:
 
 
 def main(args: argparse.Namespace) -> int:
-    from torchratslam.experiments.run_dataset import run_dataset, summary_line
+    from torchratslam.experiments.run_dataset import (
+        RUN_RECORD,
+        resume_run,
+        run_dataset,
+        summary_line,
+    )
 
+    if args.resume is not None:
+        given = [
+            f"--{k.replace('_', '-')}"
+            for k in ("config", "data", "out", "backend", "max_frames", "odometry", "groundtruth")
+            if getattr(args, k) is not None
+        ]
+        given += [f"--{k}" for k in ("set", "load") if getattr(args, k)]
+        if given:
+            raise InputError(
+                f"--resume takes the stopped run's options from {RUN_RECORD}; "
+                f"do not give {', '.join(given)}"
+            )
+        metrics = resume_run(
+            args.resume,
+            device=args.device,
+            progress=not args.no_progress,
+            threads=args.threads,
+            scale_report=args.scale_report,
+            checkpoint_every=args.checkpoint_every,
+        )
+        print(summary_line(metrics, Path(args.resume)))
+        return 0
+    missing = [f"--{k}" for k in ("config", "data", "out") if not getattr(args, k)]
+    if missing:
+        raise InputError(f"the following arguments are required: {', '.join(missing)}")
     overrides = _overrides(args.set)
     if args.backend:
         overrides["exp_backend"] = args.backend
@@ -211,6 +279,9 @@ def main(args: argparse.Namespace) -> int:
         tum=args.tum,
         rerun=args.rerun,
         rerun_save=args.rerun_save,
+        checkpoint_every=args.checkpoint_every,
+        max_speed=args.max_speed,
+        max_turn_rate=args.max_turn_rate,
     )
     print(summary_line(metrics, Path(args.out)))
     return 0

@@ -6,13 +6,12 @@ each backend, and tabulate time, error and ATE.
 from __future__ import annotations
 
 import json
-import os
-import tempfile
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from torchratslam.graph.atomic import atomic_write_text
 from torchratslam.graph.errors import InputError
 
 __all__ = [
@@ -126,11 +125,4 @@ def write_rows_json(rows: list[dict[str, Any]], path: str | Path) -> None:
         }
         for r in rows
     ]
-    fd, tmp = tempfile.mkstemp(dir=out.parent, prefix=".tmp-", suffix=".json")
-    try:
-        with os.fdopen(fd, "w") as fh:
-            json.dump(payload, fh, indent=2, default=str)
-        os.replace(tmp, out)
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
+    atomic_write_text(out, json.dumps(payload, indent=2, default=str))

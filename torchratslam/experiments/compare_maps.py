@@ -20,7 +20,7 @@ import numpy as np
 from torchratslam.eval.icp import compare_icp, libicp_point_to_point
 from torchratslam.graph.errors import InputError
 from torchratslam.maps.io import load_state, map_format
-from torchratslam.viz.plots import draw_icp_overlay
+from torchratslam.viz.plots import draw_icp_overlay, save_figure
 
 __all__ = ["compare_maps", "load_groundtruth", "map_ate"]
 
@@ -138,8 +138,7 @@ def compare_maps(
         fp = Path(figure)
         fp.parent.mkdir(parents=True, exist_ok=True)
         fig.tight_layout()
-        fig.savefig(fp, dpi=110)
-        plt.close(fig)
+        save_figure(fig, fp, dpi=110, tight=False)
         out["figure"] = str(fp)
     return out
 

@@ -8,15 +8,14 @@ from __future__ import annotations
 
 import inspect
 import json
-import os
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from torchratslam.graph.atomic import atomic_write_text, atomic_write_with
 from torchratslam.graph.errors import ConfigError, InputError
-from torchratslam.graph.io import atomic_write_text
 from torchratslam.messages import Frame
 
 __all__ = [
@@ -126,9 +125,10 @@ def _write_outputs(result: Any, metrics: dict[str, Any], out: Path) -> None:
     atomic_write_text(out / "metrics.json", json.dumps(metrics, indent=2) + "\n")
     state = result.model.get_state()
     arrays = {k.replace("/", "__"): np.asarray(v) for k, v in state.items() if k != "params"}
-    tmp = out / ".state.tmp.npz"
-    np.savez(tmp, **arrays, node_xy=result.node_xy)  # type: ignore[arg-type]
-    os.replace(tmp, out / "state.npz")
+    atomic_write_with(
+        out / "state.npz",
+        lambda fh: np.savez(fh, **arrays, node_xy=result.node_xy),  # type: ignore[arg-type]
+    )
 
 
 def run_experiment(

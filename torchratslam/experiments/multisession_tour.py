@@ -14,8 +14,6 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import os
-import tempfile
 import time
 from collections.abc import Iterable
 from dataclasses import dataclass
@@ -26,6 +24,7 @@ import numpy as np
 
 from torchratslam.config import RatSLAMConfig, load_config
 from torchratslam.eval.icp import PAPER_ICP_MSE_M2
+from torchratslam.graph.atomic import atomic_write_text
 from torchratslam.graph.errors import InputError
 from torchratslam.maps.state import MapState
 from torchratslam.multisession.session import MultiSessionRatSLAM
@@ -602,20 +601,9 @@ def tour_name(spec: str) -> str:
 
 
 def _write_json(path: Path, obj: Any) -> None:
-    """Atomic JSON write (temporary file + rename)."""
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w") as fh:
-            json.dump(
-                obj,
-                fh,
-                indent=1,
-                default=lambda v: v.item() if hasattr(v, "item") else str(v),
-            )
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    """Atomic JSON write (the one atomic writer, :mod:`torchratslam.graph.atomic`)."""
+    text = json.dumps(obj, indent=1, default=lambda v: v.item() if hasattr(v, "item") else str(v))
+    atomic_write_text(path, text)
 
 
 def run_experiment(
@@ -688,7 +676,7 @@ def run_experiment(
     report["seed"] = seed
     report["config"] = config.to_flat()
     _write_json(out / "report.json", report)
-    (out / "report.md").write_text(report_markdown(report))
+    atomic_write_text(out / "report.md", report_markdown(report))
     if figures:
         report["figures"] = [p.name for p in write_figures(result, out)]
         _write_json(out / "report.json", report)

@@ -61,6 +61,7 @@ def load_state(path: str | Path, config: Any = None) -> _state.MapState:
         MapFormatError: the map is corrupt or incompatible with ``config``.
     """
     p = Path(path)
+    _state.recover_save(p)  # a native map an interrupted save left beside its place
     kind = map_format(p)
     if kind == "native":
         return _state.load_state(p, config)

@@ -33,17 +33,20 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import logging
 import math
 import re
+import struct
 import zipfile
+import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, cast
 
 import numpy as np
 
+from torchratslam.graph.atomic import recover_directory, write_directory_atomically
 from torchratslam.graph.errors import InputError, MapFormatError
-from torchratslam.maps._atomic import write_directory_atomically
 
 __all__ = [
     "FORMAT_NAME",
@@ -52,6 +55,8 @@ __all__ = [
     "check_compatible",
     "load_map",
     "load_state",
+    "read_map_info",
+    "recover_save",
     "save_map",
     "save_state",
 ]
@@ -63,6 +68,7 @@ STATE_JSON = "state.json"
 MISSING_KEY = "missing_files"
 """Scalar key: the files a map was read without (a reference-format save lacking
 ``localviewcells.txt`` has zero templates in their place; see :func:`require_templates`)."""
+HISTORY_NPZ = "history.npz"
 
 # name -> (kind, ndim) ; kind "f" float, "i" integer. Shapes are cross-checked below.
 ARRAY_FIELDS: dict[str, tuple[str, int]] = {
@@ -382,12 +388,30 @@ def _json_default(value: Any) -> Any:
     raise TypeError(f"cannot store {type(value).__name__} in state.json")
 
 
-def save_map(state: MapState, directory: str | Path) -> Path:
+def save_map(
+    state: MapState,
+    directory: str | Path,
+    *,
+    info: dict[str, Any] | None = None,
+    extra_files: dict[str, Any] | None = None,
+) -> Path:
     """Write ``state`` to ``directory`` (native format), atomically.
 
     The files are written into a temporary directory beside the target, synced, then
-    the temporary directory is renamed into place. An existing saved map at the target
-    is replaced; an existing directory holding anything else is refused.
+    swapped with the old one in one atomic step where the platform allows it
+    (:func:`torchratslam.graph.atomic.write_directory_atomically`): at every instant
+    the target holds a complete map, the old or the new. An existing saved map at the
+    target is replaced; an existing directory holding anything else is refused.
+
+    Args:
+        state: the map.
+        directory: the target directory.
+        info: JSON-able facts about the run that made the map, stored in state.json
+            under ``"run"`` (e.g. ``{"partial": True, "stopped_at_frame": 120}``) and
+            read back with :func:`read_map_info`; not part of the map itself.
+        extra_files: more files written in the same atomic step (name -> writer of an
+            open binary file); only ``history.npz`` (a run's per-frame history, which
+            ``torchratslam run --resume`` reads) is allowed.
 
     Returns:
         The directory written.
@@ -402,12 +426,16 @@ def save_map(state: MapState, directory: str | Path) -> Path:
         if not target.is_dir():
             raise InputError(f"{target} exists and is not a directory; choose another path")
         found = {p.name for p in target.iterdir()}
-        if found - {STATE_NPZ, STATE_JSON}:
+        own = {STATE_NPZ, STATE_JSON, HISTORY_NPZ}
+        if found - own:
             raise InputError(
                 f"{target} exists and holds files other than a saved map "
-                f"({', '.join(sorted(found - {STATE_NPZ, STATE_JSON})[:3])}); refusing to "
+                f"({', '.join(sorted(found - own)[:3])}); refusing to "
                 "overwrite it: choose an empty or new directory"
             )
+    extra_files = dict(extra_files or {})
+    if set(extra_files) - {HISTORY_NPZ}:
+        raise InputError(f"save_map: extra files may only be {HISTORY_NPZ}")
     target.parent.mkdir(parents=True, exist_ok=True)
     arrays: dict[str, Any] = state.arrays()
     meta = {
@@ -419,13 +447,63 @@ def save_map(state: MapState, directory: str | Path) -> Path:
         "scalars": state.scalars,
         "counts": state.summary(),
     }
+    if info:
+        meta["run"] = info
 
     def write_json(fh) -> None:
         fh.write(json.dumps(meta, indent=1, default=_json_default).encode())
 
-    return write_directory_atomically(
-        target, {STATE_NPZ: lambda fh: np.savez(fh, **arrays), STATE_JSON: write_json}
-    )
+    files = {STATE_NPZ: lambda fh: np.savez(fh, **arrays), **extra_files, STATE_JSON: write_json}
+    return write_directory_atomically(target, files)
+
+
+def _read_npz(path: Path) -> dict[str, np.ndarray]:
+    """The arrays of ``path`` (an ``np.savez`` file), refusing pickles, and refusing any
+    member whose header declares more data than the member holds before allocating it."""
+    out: dict[str, np.ndarray] = {}
+    fmt = np.lib.format
+    with zipfile.ZipFile(path) as zf:
+        for info in zf.infolist():
+            name = info.filename
+            if not name.endswith(".npy") or name[:-4] in out:
+                raise ValueError(f"unexpected member {name!r}")
+            with zf.open(info) as fh:
+                version = fmt.read_magic(fh)
+                if version == (1, 0):
+                    shape, _, dtype = fmt.read_array_header_1_0(fh)
+                else:
+                    shape, _, dtype = fmt.read_array_header_2_0(fh)
+                if dtype.hasobject:
+                    raise ValueError(f"member {name!r} holds Python objects")
+                need = math.prod(int(s) for s in shape) * dtype.itemsize
+                if need > info.file_size:
+                    raise ValueError(
+                        f"member {name!r} declares shape {shape} ({need} bytes) but holds "
+                        f"{info.file_size} bytes"
+                    )
+            with zf.open(info) as fh:
+                out[name[:-4]] = fmt.read_array(fh, allow_pickle=False)
+    return out
+
+
+def read_map_info(directory: str | Path) -> dict[str, Any]:
+    """The ``"run"`` facts saved with a native map (see :func:`save_map`'s ``info``):
+    ``{}`` when there are none.
+
+    Raises:
+        InputError: no saved map at ``directory``.
+        MapFormatError: state.json is not valid JSON.
+    """
+    p = Path(directory)
+    native = _resolve_native(p) if p.is_dir() else None
+    if native is None:
+        raise InputError(f"{p} holds no saved map ({STATE_JSON} not found)")
+    try:
+        meta = json.loads((native / STATE_JSON).read_text())
+    except (OSError, ValueError) as exc:
+        raise MapFormatError(f"{native / STATE_JSON} cannot be read ({exc})") from None
+    run = meta.get("run") if isinstance(meta, dict) else None
+    return dict(run) if isinstance(run, dict) else {}
 
 
 def load_map(directory: str | Path) -> MapState:
@@ -443,7 +521,7 @@ def load_map(directory: str | Path) -> MapState:
             raise InputError(f"{d / name} not found: {src} is not a saved torchratslam map")
     try:
         meta = json.loads((d / STATE_JSON).read_text())
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+    except (json.JSONDecodeError, UnicodeDecodeError, RecursionError) as exc:
         raise MapFormatError(
             f"{d / STATE_JSON} is not valid JSON ({exc}); the file is corrupt or truncated"
         ) from None
@@ -453,28 +531,63 @@ def load_map(directory: str | Path) -> MapState:
             f"{meta.get('format') if isinstance(meta, dict) else None!r})"
         )
     version = meta.get("version")
+    if not isinstance(version, int) or isinstance(version, bool):
+        raise MapFormatError(
+            f"{d / STATE_JSON}: format version {version!r} is not an integer; the file is "
+            "corrupt or was edited by hand"
+        )
     if version != FORMAT_VERSION:
+        hint = "upgrade torchratslam" if version > FORMAT_VERSION else "re-save the map"
         raise MapFormatError(
             f"{src}: map format version {version!r} is not supported (this "
-            f"torchratslam reads version {FORMAT_VERSION}); upgrade torchratslam"
+            f"torchratslam reads version {FORMAT_VERSION}); {hint}"
         )
     for key in ("arrays", "config", "ids", "scalars"):
         if not isinstance(meta.get(key), dict):
             raise MapFormatError(f"{d / STATE_JSON}: missing or malformed {key!r} section")
     declared: dict[str, Any] = meta["arrays"]
+    for k, spec in declared.items():
+        shape = spec.get("shape") if isinstance(spec, dict) else None
+        if (
+            not isinstance(spec, dict)
+            or not isinstance(shape, list)
+            or not all(isinstance(v, int) and not isinstance(v, bool) for v in shape)
+            or not isinstance(spec.get("dtype"), str)
+        ):
+            raise MapFormatError(
+                f"{d / STATE_JSON}: array entry {k!r} is not a mapping with a shape (a list "
+                "of integers) and a dtype"
+            )
+    for k, v in meta["config"].items():
+        if not isinstance(v, (str, int, float, bool)) and v is not None:
+            raise MapFormatError(f"{d / STATE_JSON}: config key {k!r} has a {type(v).__name__}")
+    for k in ("pc_dim_xy", "pc_dim_th", "template_x_size", "template_y_size"):
+        v = meta["config"].get(k, 1)
+        if not isinstance(v, int) or isinstance(v, bool) or v <= 0:
+            raise MapFormatError(f"{d / STATE_JSON}: config {k} = {v!r} is not a positive integer")
     try:
-        with np.load(d / STATE_NPZ, allow_pickle=False) as npz:
-            names = set(npz.files)
-            if names != set(declared):
-                missing, extra = set(declared) - names, names - set(declared)
-                raise MapFormatError(
-                    f"{src}: state.npz and state.json disagree (missing arrays: "
-                    f"{sorted(missing)}, undeclared: {sorted(extra)})"
-                )
-            arrays = {k: npz[k] for k in names}
+        arrays: dict[str, Any] = _read_npz(d / STATE_NPZ)
+        names = set(arrays)
+        if names != set(declared):
+            missing, extra = set(declared) - names, names - set(declared)
+            raise MapFormatError(
+                f"{src}: state.npz and state.json disagree (missing arrays: "
+                f"{sorted(missing)}, undeclared: {sorted(extra)})"
+            )
     except MapFormatError:
         raise
-    except (zipfile.BadZipFile, EOFError, OSError, ValueError, KeyError) as exc:
+    except (
+        zipfile.BadZipFile,
+        zlib.error,
+        struct.error,
+        EOFError,
+        OSError,
+        ValueError,
+        KeyError,
+        TypeError,
+        NotImplementedError,  # a member with an unknown compression method
+        RuntimeError,  # an "encrypted" member
+    ) as exc:
         raise MapFormatError(
             f"{d / STATE_NPZ} cannot be read ({type(exc).__name__}: {exc}); "
             "the file is corrupt or truncated"
@@ -512,6 +625,28 @@ def _resolve_native(path: Path) -> Path | None:
     return None
 
 
+def _complete(d: Path) -> bool:
+    try:
+        load_map(d)
+    except (InputError, MapFormatError):
+        return False
+    return True
+
+
+def recover_save(p: Path) -> None:
+    """Put back a map an interrupted save left beside its target (``.state.new-*`` or
+    ``.state.old-*``), saying so; ``p`` is the map directory or a run's OUT. The loaders
+    call it first."""
+    for target in (p, p / "state") if p.is_dir() else (p,):
+        if target.exists() or target.name == "":
+            continue
+        back = recover_directory(target, _complete)
+        if back is not None:
+            logging.getLogger(__name__).warning(
+                "%s was missing after an interrupted save; recovered it from %s", target, back
+            )
+
+
 def load_state(path: str | Path, config: Any = None) -> MapState:
     """Load a native map: a saved state directory or a run's OUT directory
     (``OUT/state/``). :func:`torchratslam.maps.io.load_state` also reads the reference
@@ -527,6 +662,7 @@ def load_state(path: str | Path, config: Any = None) -> MapState:
         MapFormatError: the map is corrupt or incompatible with ``config``.
     """
     p = Path(path)
+    recover_save(p)
     if not p.exists():
         raise InputError(
             f"map {str(p)!r} not found: give a saved state directory, a run's OUT "

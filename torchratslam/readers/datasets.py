@@ -5,7 +5,9 @@ Every reader has ``frames()`` (also ``iter(reader)``), ``len(reader)``,
 ``has_odometry`` (False when the data carries no odometry, so the pipeline must use
 visual odometry). Frames are read lazily, one at a time.
 
-* :class:`DirectoryReader` -- ``frames/`` (images sorted by file name),
+* :class:`DirectoryReader` -- ``frames/`` (images in natural order of their file
+  names: ``frame_2`` before ``frame_10``; names that differ only in leading zeros are
+  refused as ambiguous; the order is logged),
   ``odometry.csv`` (header with ``t``, ``vtrans`` m/s, ``vrot`` rad/s; row k is the
   velocity over the interval that ends at row k's ``t``; other columns are ignored),
   optional ``groundtruth.csv`` (``t, x, y, theta``), optional ``meta.json`` (its
@@ -20,14 +22,18 @@ visual odometry). Frames are read lazily, one at a time.
   ``sim:NAME`` / ``sim:NAME/sessionK`` (the simulator).
 
 Errors (missing files, unreadable images, mismatched counts, non-monotonic or NaN
-timestamps and values) raise :class:`~torchratslam.graph.errors.InputError` naming the file.
+timestamps and values, odometry faster than ``max_speed`` / ``max_turn_rate``, ground
+truth whose times do not overlap the frames' times: a different time base) raise
+:class:`~torchratslam.graph.errors.InputError` naming the file and the row.
 """
 
 from __future__ import annotations
 
 import csv
+import itertools
 import json
 import logging
+import re
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -38,6 +44,7 @@ import numpy as np
 from torchratslam.graph.errors import InputError
 from torchratslam.graph.geometry import wrap_angle
 from torchratslam.messages import Frame
+from torchratslam.readers.limits import MAX_SPEED, MAX_TURN_RATE
 
 __all__ = [
     "IMAGE_EXTENSIONS",
@@ -45,6 +52,9 @@ __all__ = [
     "DirectoryReader",
     "Reader",
     "VideoReader",
+    "check_odometry",
+    "check_time_bases",
+    "natural_key",
     "open_data",
     "read_groundtruth_csv",
     "read_odometry_csv",
@@ -57,18 +67,21 @@ VIDEO_EXTENSIONS = (".mp4", ".avi", ".mkv", ".mov", ".mpg", ".mpeg", ".webm", ".
 IRAT_IMAGE_TOPIC = "/irat_red/camera/image/compressed"
 IRAT_ODOM_TOPIC = "/irat_red/odom"
 IRAT_GROUNDTRUTH_TOPIC = "/overhead/pose"
+_CSV_MAX_BYTES = 1 << 31
 
 
 # ----------------------------------------------------------------------------- CSV files
 def _read_csv_columns(path: Path, required: tuple[str, ...]) -> dict[str, np.ndarray]:
     if not path.is_file():
         raise InputError(f"{path}: file not found")
+    if path.stat().st_size > _CSV_MAX_BYTES:
+        raise InputError(f"{path}: {path.stat().st_size} bytes is too large for a CSV table")
     try:
         with path.open(newline="") as fh:
             rows = list(
                 csv.reader(line for line in fh if line.strip() and not line.startswith("#"))
             )
-    except (OSError, UnicodeDecodeError) as exc:
+    except (OSError, UnicodeDecodeError, csv.Error) as exc:
         raise InputError(f"{path}: cannot be read as CSV ({exc})") from None
     if not rows:
         raise InputError(f"{path}: empty file; expected a header with {', '.join(required)}")
@@ -102,14 +115,129 @@ def _read_csv_columns(path: Path, required: tuple[str, ...]) -> dict[str, np.nda
     return {c: out[:, j] for j, c in enumerate(required)}
 
 
-def read_odometry_csv(path: str | Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Read an odometry CSV: ``(t, vtrans, vrot)``, each ``(N,)`` float64.
+def check_odometry(
+    vtrans: np.ndarray,
+    vrot: np.ndarray,
+    source: str,
+    *,
+    max_speed: float = MAX_SPEED,
+    max_turn_rate: float = MAX_TURN_RATE,
+    first_line: int = 2,
+) -> None:
+    """Refuse NaN/inf and implausible odometry, naming the first bad row.
+
+    Args:
+        vtrans, vrot: velocities (m/s, rad/s). Shape: ``(N,)``.
+        source: the file (or topic) named in the message.
+        max_speed, max_turn_rate: the limits (m/s, rad/s).
+        first_line: the line number of row 0 (2 for a CSV with a header).
 
     Raises:
-        InputError: missing file or columns, non-numeric/NaN values, non-increasing t.
+        InputError: naming the line, the value and the limit.
+    """
+    for name, v, limit, unit, option in (
+        ("vtrans", vtrans, max_speed, "m/s", "--max-speed"),
+        ("vrot", vrot, max_turn_rate, "rad/s", "--max-turn-rate"),
+    ):
+        v = np.asarray(v, dtype=np.float64)
+        bad = ~np.isfinite(v) | (np.abs(v) > limit)
+        if bad.any():
+            i = int(np.flatnonzero(bad)[0])
+            what = "is not finite" if not np.isfinite(v[i]) else f"exceeds {limit:g} {unit}"
+            raise InputError(
+                f"{source}, line {i + first_line}: {name} = {v[i]:g} {unit} {what}; fix that "
+                f"row, or raise the limit ({option}) if the platform really moves that fast"
+            )
+
+
+def read_odometry_csv(
+    path: str | Path, *, max_speed: float = MAX_SPEED, max_turn_rate: float = MAX_TURN_RATE
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Read an odometry CSV: ``(t, vtrans, vrot)``, each ``(N,)`` float64.
+
+    Args:
+        path: the file.
+        max_speed, max_turn_rate: rows faster than these (m/s, rad/s) are refused.
+
+    Raises:
+        InputError: missing file or columns, non-numeric/NaN values, non-increasing t,
+            implausible speeds (naming the line).
     """
     c = _read_csv_columns(Path(path), ("t", "vtrans", "vrot"))
+    check_odometry(
+        c["vtrans"], c["vrot"], str(path), max_speed=max_speed, max_turn_rate=max_turn_rate
+    )
     return c["t"], c["vtrans"], c["vrot"]
+
+
+def check_time_bases(t: np.ndarray, gt: np.ndarray | None, frames: str, gt_source: str) -> None:
+    """Check that the ground truth's times cover the frames' times (same time base).
+
+    Ground truth is matched to frames by time (interpolated at each frame's ``t``). When
+    the two time ranges do not overlap, or the ground truth covers fewer than half of
+    the frames, the files use different time bases (e.g. a video's frame times from 0
+    s against Unix times): an error. A partial cover is logged as a warning.
+
+    Raises:
+        InputError: naming both ranges.
+    """
+    if gt is None or gt.shape[0] == 0 or t.size == 0:
+        return
+    lo, hi = float(gt[0, 0]), float(gt[-1, 0])
+    inside = (t >= lo - 1e-9) & (t <= hi + 1e-9)
+    frac = float(inside.mean())
+    if frac < 0.5:
+        raise InputError(
+            f"{gt_source}: ground-truth times [{lo:.6g}, {hi:.6g}] s cover "
+            f"{int(inside.sum())} of {t.size} frame times [{t[0]:.6g}, {t[-1]:.6g}] s of "
+            f"{frames}: the files use different time bases (give the odometry CSV's times, "
+            "or shift one file's t column)"
+        )
+    if frac < 1.0:
+        log.warning(
+            "%s: ground truth covers %d of %d frames (times [%.6g, %.6g] s vs frames "
+            "[%.6g, %.6g] s); frames outside it have no ground-truth pose",
+            gt_source,
+            int(inside.sum()),
+            t.size,
+            lo,
+            hi,
+            t[0],
+            t[-1],
+        )
+
+
+_DIGITS = re.compile(r"(\d+)")
+
+
+def natural_key(name: str) -> tuple:
+    """Sort key of a file name with its digit runs compared as numbers
+    (``frame_2`` < ``frame_10``)."""
+    return tuple(int(p) if i % 2 else p for i, p in enumerate(_DIGITS.split(name)))
+
+
+def natural_sort(files: list[Path], where: str) -> list[Path]:
+    """``files`` in natural order of their names (logged).
+
+    Raises:
+        InputError: two names differ only in leading zeros (``frame_1``, ``frame_01``),
+            so no order is certain.
+    """
+    keyed = sorted(((natural_key(f.name), f.name, f) for f in files), key=lambda x: (x[0], x[1]))
+    for (ka, na, _), (kb, nb, _) in itertools.pairwise(keyed):
+        if ka == kb:
+            raise InputError(
+                f"{where}: {na!r} and {nb!r} differ only in leading zeros, so their order is "
+                "ambiguous; rename the images with one numbering"
+            )
+    out = [f for _, _, f in keyed]
+    names = [f.name for f in out]
+    shown = ", ".join(names[:3]) + (f", ..., {names[-1]}" if len(names) > 3 else "")
+    if names != sorted(names):
+        log.warning("%s: %d images in natural order (not as strings): %s", where, len(out), shown)
+    else:
+        log.info("%s: %d images in order: %s", where, len(out), shown)
+    return out
 
 
 def read_groundtruth_csv(path: str | Path) -> np.ndarray:
@@ -199,6 +327,8 @@ class DirectoryReader(Reader):
         color: load images as BGR (default: grey, which is all the local view uses).
         rate: frames per second used for timestamps when there is no odometry CSV
             (then ``has_odometry`` is False and the pipeline needs visual odometry).
+        groundtruth: another ground-truth CSV to use instead of ``path/groundtruth.csv``.
+        max_speed, max_turn_rate: odometry rows faster than these are refused.
     """
 
     def __init__(
@@ -208,6 +338,9 @@ class DirectoryReader(Reader):
         odometry: str | Path | None = None,
         color: bool = False,
         rate: float = 10.0,
+        groundtruth: str | Path | None = None,
+        max_speed: float = MAX_SPEED,
+        max_turn_rate: float = MAX_TURN_RATE,
     ) -> None:
         self.path = Path(path)
         self.name = self.path.name
@@ -217,8 +350,8 @@ class DirectoryReader(Reader):
         if not fdir.is_dir():
             raise InputError(f"{self.path}: no frames/ folder; put the images in {fdir}")
         entries = sorted(fdir.iterdir())
-        self.files = [p for p in entries if p.suffix.lower() in IMAGE_EXTENSIONS]
-        if len(self.files) < len(entries):
+        files = [p for p in entries if p.suffix.lower() in IMAGE_EXTENSIONS]
+        if len(files) < len(entries):
             other = [p.name for p in entries if p.suffix.lower() not in IMAGE_EXTENSIONS]
             log.info(
                 "%s: skipped %d entries that are not images (%s)",
@@ -226,12 +359,15 @@ class DirectoryReader(Reader):
                 len(other),
                 ", ".join(other[:3]) + (", ..." if len(other) > 3 else ""),
             )
-        if not self.files:
+        if not files:
             raise InputError(f"{fdir}: no images ({', '.join(IMAGE_EXTENSIONS)})")
+        self.files = natural_sort(files, str(fdir))
         self.color = color
         odo = Path(odometry) if odometry is not None else self.path / "odometry.csv"
         if odo.is_file() or odometry is not None:
-            self.t, self.vtrans, self.vrot = read_odometry_csv(odo)
+            self.t, self.vtrans, self.vrot = read_odometry_csv(
+                odo, max_speed=max_speed, max_turn_rate=max_turn_rate
+            )
             self.has_odometry = True
             if self.t.shape[0] != len(self.files):
                 raise InputError(
@@ -246,8 +382,9 @@ class DirectoryReader(Reader):
             self.vrot = np.zeros(len(self.files))
             self.has_odometry = False
             log.info("%s: no odometry.csv; timestamps at %g frames/s, no odometry", self.path, rate)
-        gt = self.path / "groundtruth.csv"
-        self._gt = read_groundtruth_csv(gt) if gt.is_file() else None
+        gt = Path(groundtruth) if groundtruth is not None else self.path / "groundtruth.csv"
+        self._gt = read_groundtruth_csv(gt) if gt.is_file() or groundtruth is not None else None
+        check_time_bases(self.t, self._gt, str(fdir), str(gt))
         self.meta = _read_meta(self.path / "meta.json")
         camera: dict[str, Any] = (
             self.meta.get("camera") if isinstance(self.meta.get("camera"), dict) else {}  # type: ignore[assignment]
@@ -286,6 +423,10 @@ class VideoReader(Reader):
             rate and ``has_odometry`` False.
         groundtruth: optional ground-truth CSV (``t, x, y, theta``).
         color: keep BGR frames (default: grey).
+        max_speed, max_turn_rate: odometry rows faster than these are refused.
+
+    With an odometry CSV, the video's frame count must equal its rows (checked when the
+    reader is made, before any work).
     """
 
     def __init__(
@@ -295,6 +436,8 @@ class VideoReader(Reader):
         odometry: str | Path | None = None,
         groundtruth: str | Path | None = None,
         color: bool = False,
+        max_speed: float = MAX_SPEED,
+        max_turn_rate: float = MAX_TURN_RATE,
     ) -> None:
         self.path = Path(path)
         self.name = self.path.stem
@@ -308,8 +451,15 @@ class VideoReader(Reader):
         cap.release()
         self.color = color
         if odometry is not None:
-            self.t, self.vtrans, self.vrot = read_odometry_csv(odometry)
+            self.t, self.vtrans, self.vrot = read_odometry_csv(
+                odometry, max_speed=max_speed, max_turn_rate=max_turn_rate
+            )
             self.has_odometry = True
+            if self._count != self.t.shape[0] and self._exact_count() != self.t.shape[0]:
+                raise InputError(
+                    f"{self.path}: {self._count} frames but {self.t.shape[0]} rows in "
+                    f"{odometry}; the counts must match (one odometry row per frame)"
+                )
         else:
             self.t = np.arange(max(self._count, 0), dtype=np.float64) / self.fps
             self.vtrans = np.zeros_like(self.t)
@@ -319,6 +469,19 @@ class VideoReader(Reader):
                 "%s: no odometry CSV; timestamps at %g frames/s, no odometry", self.path, self.fps
             )
         self._gt = read_groundtruth_csv(groundtruth) if groundtruth is not None else None
+        check_time_bases(self.t, self._gt, str(self.path), str(groundtruth))
+
+    def _exact_count(self) -> int:
+        """The number of frames, counted by reading (the container's count can be off)."""
+        cap = cv2.VideoCapture(str(self.path))
+        n = 0
+        try:
+            while cap.grab():
+                n += 1
+        finally:
+            cap.release()
+        self._count = n
+        return n
 
     def __len__(self) -> int:
         return int(self.t.shape[0])
@@ -367,6 +530,8 @@ def open_data(
     image_topic: str = IRAT_IMAGE_TOPIC,
     odom_topic: str | None = IRAT_ODOM_TOPIC,
     color: bool = False,
+    max_speed: float = MAX_SPEED,
+    max_turn_rate: float = MAX_TURN_RATE,
 ) -> Any:
     """Open a dataset from a spec.
 
@@ -375,9 +540,10 @@ def open_data(
             directory (or its ``.db3`` / ``.mcap`` file), or ``sim:NAME`` /
             ``sim:NAME/sessionK`` (the simulator's tours).
         odometry: an odometry CSV (for a video, or to replace a directory's).
-        groundtruth: a ground-truth CSV for a video.
+        groundtruth: a ground-truth CSV (for a video, or to replace a directory's).
         image_topic, odom_topic: ROS topics for a bag.
         color: load BGR images instead of grey.
+        max_speed, max_turn_rate: odometry faster than these (m/s, rad/s) is refused.
 
     Returns:
         A reader (or a simulator session) with ``frames()``, ``len()`` and
@@ -388,9 +554,17 @@ def open_data(
     """
     s = str(spec)
     if s.startswith("sim:"):
+        given = [n for n, v in (("odometry", odometry), ("groundtruth", groundtruth)) if v]
+        if given:
+            raise InputError(
+                f"data {s!r}: the simulator makes its own odometry and ground truth; "
+                f"{' and '.join(given)} cannot be given with sim: data (write the tour with "
+                "'torchratslam simulate' and edit its CSVs instead)"
+            )
         from torchratslam.sim import open_sim
 
         return open_sim(s)
+    limits = {"max_speed": max_speed, "max_turn_rate": max_turn_rate}
     p = Path(s)
     if not p.exists():
         raise InputError(
@@ -401,10 +575,10 @@ def open_data(
     if is_bag(p):
         return BagReader(p, image_topic=image_topic, odom_topic=odom_topic, color=color)
     if p.is_dir():
-        return DirectoryReader(p, odometry=odometry, color=color)
+        return DirectoryReader(p, odometry=odometry, groundtruth=groundtruth, color=color, **limits)
     suffix = p.suffix.lower()
     if suffix in VIDEO_EXTENSIONS:
-        return VideoReader(p, odometry=odometry, groundtruth=groundtruth, color=color)
+        return VideoReader(p, odometry=odometry, groundtruth=groundtruth, color=color, **limits)
     raise InputError(
         f"data {s!r}: unknown kind (expected a directory, a video {', '.join(VIDEO_EXTENSIONS)}, "
         "a ROS 1 .bag, a ROS 2 bag directory, or sim:NAME)"

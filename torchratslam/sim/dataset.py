@@ -22,7 +22,6 @@ from __future__ import annotations
 import json
 import os
 import shutil
-import tempfile
 from pathlib import Path
 from typing import Any
 from urllib.parse import parse_qsl
@@ -120,13 +119,22 @@ def write_dataset(
     Raises:
         InputError: ``out_dir`` exists, is not empty, and ``overwrite`` is False.
     """
+    from torchratslam.graph.atomic import Manifest, make_dirs, swap_in, unique_name
+
     out = Path(out_dir)
-    if out.exists() and (not out.is_dir() or any(out.iterdir())) and not overwrite:
-        raise InputError(
-            f"{out} exists and is not empty; choose another --out or pass overwrite (--overwrite)"
-        )
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
+    if out.exists() and not out.is_dir():
+        raise InputError(f"{out} exists and is not a directory; choose another --out")
+    if out.exists() and any(out.iterdir()):
+        if not overwrite:
+            raise InputError(
+                f"{out} exists and is not empty; choose another --out or pass overwrite "
+                "(--overwrite)"
+            )
+        # --overwrite replaces only a directory this project wrote (its manifest)
+        Manifest(out).check_overwrite("overwrite it")
+    make_dirs(out.parent)
+    tmp = unique_name(out, "new")
+    tmp.mkdir()
     try:
         (tmp / "frames").mkdir()
         n = len(session)
@@ -184,14 +192,8 @@ def write_dataset(
             "kidnaps": [int(i) for i in np.flatnonzero(session.odometry[1:, 2] == 0) + 1],
         }
         (tmp / "meta.json").write_text(json.dumps(meta, indent=2, default=str) + "\n")
-        if out.exists():
-            old = Path(tempfile.mkdtemp(prefix=f".{out.name}.old.", dir=out.parent))
-            old.rmdir()
-            out.rename(old)
-            tmp.rename(out)
-            shutil.rmtree(old, ignore_errors=True)
-        else:
-            tmp.rename(out)
+        Manifest(tmp).add(p.name for p in tmp.iterdir())
+        swap_in(tmp, out)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise

@@ -19,6 +19,8 @@ def plot_results(result: Any, session: Any, out: Path, *, paper: dict[str, Any])
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    from torchratslam.viz.plots import save_figure
+
     g, xy = result.model.graph, result.node_xy
     fig, ax = plt.subplots(figsize=(7, 6))
     session.world.plot(ax)
@@ -29,8 +31,7 @@ def plot_results(result: Any, session: Any, out: Path, *, paper: dict[str, Any])
     ax.set_aspect("equal")
     ax.set_title(f"MBARAM topological map: {len(xy)} nodes, {g.number_of_edges()} edges")
     ax.legend(loc="upper right", fontsize=8)
-    fig.savefig(out / "map.png", dpi=120, bbox_inches="tight")
-    plt.close(fig)
+    save_figure(fig, out / "map.png", dpi=120)
 
     per_lap = result.nodes_per_lap
     fig, ax = plt.subplots(figsize=(6, 4))
@@ -47,8 +48,7 @@ def plot_results(result: Any, session: Any, out: Path, *, paper: dict[str, Any])
     ax.set_ylabel("nodes added")
     ax.set_xticks(laps)
     ax.legend()
-    fig.savefig(out / "nodes_per_lap.png", dpi=120, bbox_inches="tight")
-    plt.close(fig)
+    save_figure(fig, out / "nodes_per_lap.png", dpi=120)
 
     m = result.metrics
     w, wo = m["localisation_per_lap_with_odometry"], m["localisation_per_lap_without_odometry"]
@@ -64,5 +64,4 @@ def plot_results(result: Any, session: Any, out: Path, *, paper: dict[str, Any])
         ax.set_ylabel("success rate (%)")
         ax.set_xticks(laps)
         ax.legend()
-        fig.savefig(out / "localisation.png", dpi=120, bbox_inches="tight")
-        plt.close(fig)
+        save_figure(fig, out / "localisation.png", dpi=120)

@@ -146,6 +146,8 @@ def write_figures(result: dict[str, Any], out: Path) -> list[Path]:
     matplotlib.use("Agg", force=False)
     import matplotlib.pyplot as plt
 
+    from torchratslam.viz.plots import save_figure
+
     data, report = result["data"], result["report"]
     paths = []
     for name, draw in _panels(data):
@@ -156,7 +158,6 @@ def write_figures(result: dict[str, Any], out: Path) -> list[Path]:
         ax.legend(fontsize=7, loc="best")
         fig.tight_layout()
         p = Path(out) / name
-        fig.savefig(p, dpi=100)
-        plt.close(fig)
+        save_figure(fig, p, dpi=100, tight=False)
         paths.append(p)
     return paths

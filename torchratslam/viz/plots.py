@@ -12,8 +12,6 @@ Both write a PNG with matplotlib's Agg backend (no display needed) atomically.
 
 from __future__ import annotations
 
-import os
-import tempfile
 from pathlib import Path
 from typing import Any
 
@@ -29,19 +27,20 @@ from torchratslam.eval.metrics import align_se2
 __all__ = ["draw_icp_overlay", "plot_map", "plot_pose_cells", "save_figure"]
 
 
-def save_figure(fig: Any, path: str | Path, dpi: int = 110) -> Path:
-    """Save a matplotlib figure atomically (temp file + rename) and close it."""
+def save_figure(fig: Any, path: str | Path, dpi: int = 110, *, tight: bool = True) -> Path:
+    """Save a matplotlib figure atomically (temp file + rename) and close it
+    (``tight``: ``bbox_inches="tight"``)."""
+    from torchratslam.graph.atomic import atomic_write_with
+
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(suffix=path.suffix or ".png", dir=path.parent, prefix=".tmp-")
-    os.close(fd)
+    fmt = (path.suffix or ".png").lstrip(".")
     try:
-        fig.savefig(tmp, dpi=dpi, bbox_inches="tight")
-        os.replace(tmp, path)
+        atomic_write_with(
+            path,
+            lambda fh: fig.savefig(fh, dpi=dpi, bbox_inches="tight" if tight else None, format=fmt),
+        )
     finally:
         plt.close(fig)
-        if os.path.exists(tmp):
-            os.unlink(tmp)
     return path
 
 

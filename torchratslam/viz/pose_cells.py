@@ -143,10 +143,12 @@ def plot_activity(
     fig.tight_layout()
     if path is None:
         return fig
+    from torchratslam.graph.atomic import atomic_write_with
+
     out = Path(path)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = out.with_name(out.name + ".tmp.png")
-    fig.savefig(tmp, dpi=110)
-    plt.close(fig)
-    os.replace(tmp, out)
+    fmt = (out.suffix or ".png").lstrip(".")
+    try:
+        atomic_write_with(out, lambda fh: fig.savefig(fh, dpi=110, format=fmt))
+    finally:
+        plt.close(fig)
     return out

@@ -556,7 +556,14 @@ def test_write_dataset_round_trip(tmp_path):
     s = get_tour("loop", laps=0.05, moving_obstacles=1).full()
     out = write_dataset(s, tmp_path / "ds")
     names = sorted(p.name for p in out.iterdir())
-    assert names == ["frames", "groundtruth.csv", "meta.json", "odometry.csv", "scans.npz"]
+    assert names == [
+        ".torchratslam-manifest.json",
+        "frames",
+        "groundtruth.csv",
+        "meta.json",
+        "odometry.csv",
+        "scans.npz",
+    ]
     assert len(list((out / "frames").glob("*.png"))) == len(s)
     img = cv2.imread(str(out / "frames" / "000004.png"), cv2.IMREAD_UNCHANGED)
     assert np.array_equal(img, s.render(4))
