@@ -341,12 +341,15 @@ def check_device(spec: str | None) -> Any:
 
 
 def _data_kind(spec: str) -> str:
+    """"sim", "bag" (ROS 1 or ROS 2, a file or a bag directory), "directory" or "video"."""
+    from torchratslam.readers.bags import is_bag
+
     if spec.startswith("sim:"):
         return "sim"
     p = Path(spec)
-    if p.is_dir():
-        return "directory"
-    return "bag" if p.suffix.lower() == ".bag" else "video"
+    if is_bag(p):
+        return "bag"
+    return "directory" if p.is_dir() else "video"
 
 
 def _check_applicable(opts: dict[str, Any]) -> None:
