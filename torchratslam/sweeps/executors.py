@@ -37,7 +37,7 @@ def _worker_init(threads: int) -> None:
     import torch
 
     torch.set_num_threads(threads)
-    logging.getLogger("torchratslam").setLevel(logging.ERROR)
+    logging.disable(logging.WARNING)  # a worker reports through its results, not its log
 
 
 def _run_unit(unit: Unit, threads: int = 1) -> list[dict[str, Any]]:
