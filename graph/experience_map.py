@@ -140,6 +140,8 @@ class ExperienceMap:
         self._g = nx.DiGraph()
         self._poses_dirty = False
         self._order: np.ndarray | None = None
+        self._links_version = 0  # bumped by every change of the links
+        self._ref_links: tuple | None = None  # (links version, src, dst, link) in ref order
         self._version = 0  # bumped by every change of poses or links
         self._fixed_at: tuple | None = None  # (version, params, backend) of a fixed point
         self.current_id = -1
@@ -283,6 +285,7 @@ class ExperienceMap:
         self._link[k] = (d, heading, facing, dt)
         self._meas[k] = _measurement_of(d, heading, facing)
         self._version += 1
+        self._links_version += 1
 
     def _sync_edge(self, k: int) -> None:
         self._g.edges[int(self._src[k]), int(self._dst[k])].update(self._edge_attrs(k))
@@ -359,6 +362,7 @@ class ExperienceMap:
         self._e = e - 1
         self._g.remove_edge(int(src), int(dst))
         self._version += 1
+        self._links_version += 1
         s, d = self._src[: self._e].tolist(), self._dst[: self._e].tolist()
         self._eidx = {(a, b): i for i, (a, b) in enumerate(zip(s, d))}
         self._order = None
@@ -442,8 +446,9 @@ class ExperienceMap:
             The new experience id.
         """
         cur = self.current_id
+        first_at_origin = self.params.exp_first_at_origin
         if cur < 0:
-            x, y = 0.0, 0.0
+            x, y = (0.0, 0.0) if first_at_origin else (self.accum_x, self.accum_y)
         else:
             x = float(self._pose[cur, 0]) + self.accum_x
             y = float(self._pose[cur, 1]) + self.accum_y
@@ -453,6 +458,11 @@ class ExperienceMap:
         if cur >= 0:
             self._transition(cur, new, behaviour)
             self._link_from_accumulators(cur, new, 0.0, behaviour)
+        elif not first_at_origin:
+            # OpenRatSLAM: its current id starts at 0, so on_set_experience(0, 0) returns
+            # at once and the accumulators run on from where they are
+            self.current_id = new
+            return new
         self._make_current(new, 0.0)
         return new
 
@@ -461,7 +471,7 @@ class ExperienceMap:
     ) -> bool:
         d, heading, facing = self._measurement(src, relative_rad)
         added = self.add_link(src, dst, d, heading, facing, self.accum_time, behaviour=behaviour)
-        if added:
+        if added and self.params.exp_link_time == "per_link":
             self.accum_time = 0.0
         return added
 
@@ -526,7 +536,8 @@ class ExperienceMap:
         self._set_link_values(
             k, math.hypot(new[0], new[1]), math.atan2(new[1], new[0]), float(new[2]), dt
         )
-        self.accum_time = 0.0
+        if self.params.exp_link_time == "per_link":
+            self.accum_time = 0.0
         self._sync_edge(k)
 
     def _transition(self, src: int, dst: int, behaviour: int) -> None:
@@ -591,8 +602,27 @@ class ExperienceMap:
         if self._backend is None:
             from torchratslam.graph.backends import make_backend
 
-            self._backend = make_backend(self.params.exp_backend)
+            name = self.params.exp_backend
+            if name == "alpha":
+                self._backend = make_backend(name, schedule=self.params.exp_relax_order)
+            else:
+                self._backend = make_backend(name)
         return self._backend
+
+    def _reference_links(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Link ends and ``(d, heading, facing)`` in OpenRatSLAM's order (cached)."""
+        cached = self._ref_links
+        if cached is None or cached[0] != self._links_version or len(cached[1]) != self._e:
+            idx = self._reference_order()
+            e = self._e
+            cached = (
+                self._links_version,
+                np.ascontiguousarray(self._src[:e][idx]),
+                np.ascontiguousarray(self._dst[:e][idx]),
+                np.ascontiguousarray(self._link[:e, :3][idx]),
+            )
+            self._ref_links = cached
+        return cached[1], cached[2], cached[3]
 
     def iterate(self) -> None:
         """Relax the map: ``exp_loops`` passes of the backend, poses written back.
@@ -613,6 +643,17 @@ class ExperienceMap:
         backend = self.backend
         key = (self._version, id(self.params), id(backend))
         if self._fixed_at == key:
+            return
+        if alpha and getattr(backend, "schedule", None) == "openratslam":
+            # OpenRatSLAM's loop, compiled, in place on the map's own arrays
+            from torchratslam.graph.backends.alpha import sweep_openratslam
+
+            src, dst, link = self._reference_links()
+            ran = sweep_openratslam(self._pose, src, dst, link, loops, self.params.exp_correction)
+            self._poses_dirty = True
+            self._version += 1
+            if ran < loops:  # a pass changed nothing: the map is at its fixed point
+                self._fixed_at = (self._version, id(self.params), id(backend))
             return
         pg = self.posegraph()
         kw: dict[str, float] = {"correction": self.params.exp_correction}

@@ -37,6 +37,7 @@ CONFIG_DIR = _presets_dir()
 
 __all__ = [
     "CONFIG_DIR",
+    "PROFILES",
     "ExperienceMapParams",
     "GeneralParams",
     "LocalViewParams",
@@ -46,6 +47,7 @@ __all__ = [
     "VisualOdometryParams",
     "load_config",
     "param",
+    "profile_values",
 ]
 
 
@@ -62,6 +64,23 @@ class GeneralParams(Params):
     pose_cells: str = param("ratslam", "pose-cell module (a name in registry.POSE_CELLS)")
     experience_map: str = param("ratslam", "experience map (a name in registry.EXPERIENCE_MAPS)")
     odometry: str = param("given", "odometry source: given | visual (registry.ODOMETRY)")
+    behaviour: str = param(
+        "openratslam",
+        "behaviour profile: openratslam (exactly OpenRatSLAM) | torchratslam (the project's "
+        "own choices); sets every key of PROFILES that the config does not set itself",
+        choices=("openratslam", "torchratslam"),
+    )
+    skip_first_odometry: bool = param(
+        True,
+        "no pose-cell step, no action and no experience-map odometry at frame 0, as "
+        "OpenRatSLAM's nodes skip their first odometry message (prev_time == 0)",
+    )
+    action_angle: str = param(
+        "injection",
+        "relative angle an action carries to the experience map: injection (the last "
+        "injection's, OpenRatSLAM's get_relative_rad) | view (this frame's view angle)",
+        choices=("injection", "view"),
+    )
 
 
 @dataclass(frozen=True)
@@ -128,6 +147,30 @@ class VisualOdometryParams(Params):
     vtrans_max: float = param(20.0, "cap on the translational speed estimate", ge=0.0)
 
 
+# Behaviour profiles (issue 12): ``behaviour: NAME`` sets each of these keys unless the
+# config sets it itself. "openratslam" is OpenRatSLAM exactly (the defaults of the
+# dataclasses); "torchratslam" is the project's own behaviour before issue 12.
+# docs/openratslam-fidelity.md gives every key's measured effect.
+PROFILES: dict[str, dict[str, Any]] = {
+    "openratslam": {
+        "skip_first_odometry": True,
+        "action_angle": "injection",
+        "exp_relax": "on_action",
+        "exp_first_at_origin": False,
+        "exp_link_time": "since_start",
+        "exp_relax_order": "openratslam",
+    },
+    "torchratslam": {
+        "skip_first_odometry": False,
+        "action_angle": "view",
+        "exp_relax": "every_frame",
+        "exp_first_at_origin": True,
+        "exp_link_time": "per_link",
+        "exp_relax_order": "colour",
+    },
+}
+DEFAULT_BEHAVIOUR = "openratslam"
+
 # Keys that only drive OpenRatSLAM's on-screen drawing; accepted and ignored anywhere.
 DISPLAY_KEYS = frozenset(
     {
@@ -184,6 +227,7 @@ class RatSLAMConfig:
         """
         owner = cls.key_owner()
         grouped: dict[str, dict[str, Any]] = {attr: {} for attr in cls.sections()}
+        values = {**profile_values(values.get("behaviour", DEFAULT_BEHAVIOUR), source), **values}
         for key, value in values.items():
             if key in META_KEYS or key in DISPLAY_KEYS:
                 continue
@@ -204,8 +248,31 @@ class RatSLAMConfig:
         return out
 
     def replace(self, **changes: Any) -> RatSLAMConfig:
-        """A copy with some flat keys changed (validated like a loaded file)."""
-        return self.from_flat({**self.to_flat(), **changes}, source="replace()")
+        """A copy with some flat keys changed (validated like a loaded file).
+
+        Changing ``behaviour`` sets the new profile's keys too, except those given in
+        ``changes`` and those whose current value differs from the old profile's (keys
+        the config set itself; a key set to the old profile's own value follows the new
+        profile).
+        """
+        flat = self.to_flat()
+        if "behaviour" in changes:
+            old = profile_values(flat["behaviour"], "replace()")
+            flat = {k: v for k, v in flat.items() if k not in old or v != old[k]}
+        return self.from_flat({**flat, **changes}, source="replace()")
+
+
+def profile_values(name: Any, source: str = "config") -> dict[str, Any]:
+    """The keys a behaviour profile sets (a copy of ``PROFILES[name]``).
+
+    Raises:
+        ConfigError: an unknown profile name (with the nearest valid one).
+    """
+    if name not in PROFILES:
+        raise ConfigError(
+            f"{source}: " + unknown_name_message("behaviour profile", str(name), PROFILES)
+        )
+    return dict(PROFILES[name])
 
 
 def _read_yaml(path: Path) -> dict[str, Any]:

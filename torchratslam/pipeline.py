@@ -39,8 +39,10 @@ Example:
 
 from __future__ import annotations
 
+import dataclasses
 import importlib
 import itertools
+import math
 import queue
 import threading
 import time
@@ -53,7 +55,7 @@ import torch
 
 from torchratslam.config import RatSLAMConfig, VisualOdometryParams
 from torchratslam.graph.errors import ConfigError, InputError
-from torchratslam.graph.messages import Action
+from torchratslam.graph.messages import Action, ActionKind
 from torchratslam.messages import Frame, ViewMatch
 from torchratslam.readers.visual_odometry import GivenOdometry, VisualOdometry
 from torchratslam.registry import EXPERIENCE_MAPS, LOCAL_VIEWS, ODOMETRY, POSE_CELLS, Registry
@@ -310,13 +312,29 @@ class RatSLAM:
             view = self.local_view.process(frame.image, frame_index=index)
         return odo, view  # type: ignore[return-value]
 
+    def _skips_odometry(self, index: int) -> bool:
+        """OpenRatSLAM's nodes skip their first odometry message (``skip_first_odometry``)."""
+        return index == 0 and bool(getattr(self.config.general, "skip_first_odometry", False))
+
     def _stage_pose_cells(
-        self, view: ViewMatch, odo: tuple[float, float, float]
+        self, view: ViewMatch, odo: tuple[float, float, float], index: int = -1
     ) -> tuple[Action, tuple[float, float, float]]:
+        pcs = self.pose_cells
         with self.timings.section("pose_cells"):
-            self.pose_cells.on_view_template(view)
-            action = self.pose_cells.on_odometry(*odo)
-            pc = _centre(self.pose_cells)
+            pcs.on_view_template(view)
+            if self._skips_odometry(index):
+                action = Action.none()
+            else:
+                action = pcs.on_odometry(*odo)
+                if (
+                    action.kind != ActionKind.NONE
+                    and getattr(self.config.general, "action_angle", "view") == "injection"
+                    and hasattr(pcs, "vt_delta_pc_th")
+                ):
+                    # OpenRatSLAM's get_relative_rad(): the angle of the last injection
+                    rad = pcs.vt_delta_pc_th * 2.0 * math.pi / pcs.dims[2]
+                    action = dataclasses.replace(action, relative_rad=rad)
+            pc = _centre(pcs)
         return action, pc
 
     def _stage_experience_map(
@@ -329,12 +347,15 @@ class RatSLAM:
         pc: tuple[float, float, float],
     ) -> int:
         em = self.experience_map
+        relax = getattr(getattr(em, "params", None), "exp_relax", "every_frame")
         with self.timings.section("experience_map"):
-            em.on_odometry(*odo)
+            if not self._skips_odometry(index):
+                em.on_odometry(*odo)
             em.apply(
                 action, frame=index, t=float(frame.t), pc=pc, template_id=int(view.template_id)
             )
-            em.iterate()
+            if relax == "every_frame" or action.kind != ActionKind.NONE:
+                em.iterate()
         return int(em.current_id)
 
     def _finish(
@@ -362,7 +383,7 @@ class RatSLAM:
         """Process one frame (sequentially) and return what it did."""
         index = self.frame_index
         odo, view = self._stage_view(frame, index)
-        action, pc = self._stage_pose_cells(view, odo)
+        action, pc = self._stage_pose_cells(view, odo, index)
         exp_id = self._stage_experience_map(frame, index, view, odo, action, pc)
         self.frame_index += 1
         return self._finish(frame, index, view, odo, action, pc, exp_id)
@@ -523,8 +544,8 @@ class RatSLAM:
             return (frame, start + i, *self._stage_view(frame, start + i))
 
         def pc_work(item: tuple) -> tuple:
-            _, _, odo, view = item
-            return (*item, *self._stage_pose_cells(view, odo))
+            _, index, odo, view = item
+            return (*item, *self._stage_pose_cells(view, odo, index))
 
         def em_work(item: tuple) -> tuple:
             frame, index, odo, view, action, pc = item
