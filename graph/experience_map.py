@@ -47,7 +47,6 @@ from torchratslam.graph.features import (
     link_confidence,
     peak_experience,
     rotate_link_components,
-    signed_delta_rad,
     temporal_map,
     wrap_rad,
 )
@@ -78,6 +77,15 @@ def _grow(a: np.ndarray, need: int) -> np.ndarray:
     out = np.zeros((cap, *a.shape[1:]), dtype=a.dtype)
     out[: len(a)] = a
     return out
+
+
+def _wrap(a: float) -> float:
+    """:func:`~torchratslam.graph.features.wrap_rad` for one Python float, without numpy
+    (the same floor remainder, so bit-identical to it)."""
+    return math.pi - ((math.pi - a) % _TWO_PI)
+
+
+_TWO_PI = 2.0 * math.pi
 
 
 def _measurement_of(d: float, heading: float, facing: float) -> tuple[float, float, float]:
@@ -138,6 +146,7 @@ class ExperienceMap:
         self._behaviour = np.zeros(0, dtype=np.int64)
         self._eidx: dict[tuple[int, int], int] = {}
         self._g = nx.DiGraph()
+        self._dirty_edges: set[int] = set()  # links whose graph attributes are stale
         self._poses_dirty = False
         self._order: np.ndarray | None = None
         self._links_version = 0  # bumped by every change of the links
@@ -190,6 +199,8 @@ class ExperienceMap:
         behaviour, confidence``. Treat it as read-only: change the map through the
         methods so the arrays stay in sync.
         """
+        if self._dirty_edges:
+            self._flush_edges()
         if self._poses_dirty:
             p = self._pose[: self._n].tolist()
             nx.set_node_attributes(
@@ -231,7 +242,7 @@ class ExperienceMap:
         Returns:
             The new experience id (= its row).
         """
-        pose = np.array([x, y, wrap_rad(th)], dtype=np.float64)
+        pose = np.array([x, y, _wrap(float(th))], dtype=np.float64)
         pcv = np.asarray(pc, dtype=np.float64).reshape(-1)
         if pcv.shape != (3,) or not (np.all(np.isfinite(pose)) and np.all(np.isfinite(pcv))):
             raise InputError(
@@ -288,7 +299,13 @@ class ExperienceMap:
         self._links_version += 1
 
     def _sync_edge(self, k: int) -> None:
-        self._g.edges[int(self._src[k]), int(self._dst[k])].update(self._edge_attrs(k))
+        """Mark link ``k``'s attributes for the graph (written when :attr:`graph` is read)."""
+        self._dirty_edges.add(k)
+
+    def _flush_edges(self) -> None:
+        for k in sorted(self._dirty_edges):
+            self._g.edges[int(self._src[k]), int(self._dst[k])].update(self._edge_attrs(k))
+        self._dirty_edges.clear()
 
     def link_index(self, a: int, b: int) -> int:
         """Row of the link between ``a`` and ``b`` in either direction, or -1."""
@@ -339,9 +356,7 @@ class ExperienceMap:
             setattr(self, f"_{name}", _grow(getattr(self, f"_{name}"), need))
         self._src[k] = src
         self._dst[k] = dst
-        self._set_link_values(
-            k, float(d), float(wrap_rad(heading)), float(wrap_rad(facing)), float(dt)
-        )
+        self._set_link_values(k, float(d), _wrap(float(heading)), _wrap(float(facing)), float(dt))
         self._counts[k] = counts
         self._behaviour[k] = int(behaviour)
         self._e = need
@@ -355,6 +370,7 @@ class ExperienceMap:
         k = self._eidx.get((int(src), int(dst)))
         if k is None:
             raise GraphError(f"there is no link {src} -> {dst} to remove")
+        self._flush_edges()  # rows shift below
         e = self._e
         for name in self._LINK_FIELDS:
             a = getattr(self, f"_{name}")
@@ -377,7 +393,7 @@ class ExperienceMap:
             dt: interval (s).
         """
         step = vtrans * dt
-        self.accum_facing = wrap_rad(self.accum_facing + vrot * dt)
+        self.accum_facing = _wrap(self.accum_facing + vrot * dt)
         self.accum_x += step * math.cos(self.accum_facing)
         self.accum_y += step * math.sin(self.accum_facing)
         self.accum_time += dt
@@ -386,8 +402,8 @@ class ExperienceMap:
         """The accumulated transition as a link of ``src``: ``(d, heading, facing)``."""
         th = float(self._pose[src, 2])
         d = math.hypot(self.accum_x, self.accum_y)
-        heading = signed_delta_rad(th, math.atan2(self.accum_y, self.accum_x))
-        facing = signed_delta_rad(th, wrap_rad(self.accum_facing + relative_rad))
+        heading = _wrap(math.atan2(self.accum_y, self.accum_x) - th)
+        facing = _wrap(_wrap(self.accum_facing + relative_rad) - th)
         return d, float(heading), float(facing)
 
     # --------------------------------------------------------------- actions
@@ -453,7 +469,7 @@ class ExperienceMap:
             x = float(self._pose[cur, 0]) + self.accum_x
             y = float(self._pose[cur, 1]) + self.accum_y
         new = self.add_experience(
-            x, y, wrap_rad(self.accum_facing), pc=pc, template_id=template_id, frame=frame, t=t
+            x, y, _wrap(self.accum_facing), pc=pc, template_id=template_id, frame=frame, t=t
         )
         if cur >= 0:
             self._transition(cur, new, behaviour)
@@ -515,7 +531,7 @@ class ExperienceMap:
         self.current_id = dest
         self.accum_x = 0.0
         self.accum_y = 0.0
-        self.accum_facing = wrap_rad(float(self._pose[dest, 2]) + relative_rad)
+        self.accum_facing = _wrap(float(self._pose[dest, 2]) + relative_rad)
         self.relative_rad = float(relative_rad)
 
     def _repeat_or_count(self, cur: int, dest: int, relative_rad: float, behaviour: int) -> None:
@@ -646,10 +662,11 @@ class ExperienceMap:
             return
         if alpha and getattr(backend, "schedule", None) == "openratslam":
             # OpenRatSLAM's loop, compiled, in place on the map's own arrays
-            from torchratslam.graph.backends.alpha import sweep_openratslam
+            # (the arrays are the map's own: float64, C-contiguous, int64 ends)
+            from torchratslam.graph.backends._sweep import sweep
 
             src, dst, link = self._reference_links()
-            ran = sweep_openratslam(self._pose, src, dst, link, loops, self.params.exp_correction)
+            ran = sweep(self._pose, src, dst, link, loops, float(self.params.exp_correction))
             self._poses_dirty = True
             self._version += 1
             if ran < loops:  # a pass changed nothing: the map is at its fixed point
