@@ -40,6 +40,7 @@ Example:
 from __future__ import annotations
 
 import dataclasses
+import gc
 import importlib
 import itertools
 import math
@@ -471,6 +472,14 @@ class RatSLAM:
                 if n % 25 == 0 or n == total:
                     bar.set_postfix(templates=r.templates, experiences=r.experiences, refresh=False)
 
+        # Python's cyclic garbage collector: a full collection scans every object alive
+        # (torch, the frames, the map: 10^5-10^6 objects, tens of ms) and fires on
+        # allocation counts, i.e. at random frames. Objects that exist before the run
+        # are parked in the permanent generation for its duration, so collections only
+        # scan what the run itself allocates (only when nobody else froze objects).
+        freeze = gc.isenabled() and gc.get_freeze_count() == 0
+        if freeze:
+            gc.freeze()
         t0 = time.perf_counter()
         try:
             if pipelined:
@@ -479,6 +488,8 @@ class RatSLAM:
                 for frame in it:
                     on_result(self.step_frame(frame))
         finally:
+            if freeze:
+                gc.unfreeze()
             if bar is not None:
                 bar.close()
         wall = time.perf_counter() - t0
