@@ -20,7 +20,14 @@ GOLDEN = ROOT / "tests" / "data" / "layout_golden"
 
 #: Config overrides that select the behaviour the goldens were recorded with (the
 #: project's own pre-issue-12 behaviour). Empty while that is the default.
-BEHAVIOUR_OVERRIDES: list[str] = []
+BEHAVIOUR_OVERRIDES: list[str] = [
+    "pc_decode=exact",
+    "vt_inject_rule=last_10",
+    "pc_axis=math",
+    "pc_wrap=preserve_mass",
+    "pc_multi_cell=true",
+    "pc_engine=torch",
+]
 
 RUNS = [("virtual_tour", "virtual_tour"), ("lab_tour", "lab_tour"), ("irat_like", "irat")]
 
