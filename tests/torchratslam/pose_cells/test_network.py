@@ -584,3 +584,72 @@ def test_decoded_centre_equals_brute_force_population_vector_across_the_wrap(see
             [11.0, 11.0, 12.0]
         ) - np.array([5.5, 5.5, 6.0])
         assert np.abs(diff).max() < 1e-9
+
+
+# ------------------------------------------------------- torch module behaviour
+@pytest.mark.parametrize("method", ["numpy", "crop", "separable"])
+@pytest.mark.parametrize("profile", ["openratslam", "project"])
+def test_double_float_and_to_move_the_caches_with_the_activity(method, profile):
+    p = PoseCellParams() if profile == "openratslam" else _params()
+    net = PoseCellNetwork(p, dtype=torch.float32, method=method)
+    ref = PoseCellNetwork(p, dtype=F64, method=method)
+    for n in (net, ref):
+        n.step(0.4, 0.1, 1.0)  # builds the float32 matrices and scratch buffers
+    net.double()
+    ref_c = ref.step(0.3, -0.2, 1.0)
+    c = net.step(0.3, -0.2, 1.0)
+    assert net.activity.dtype == F64 and net.best.dtype == F64
+    np.testing.assert_allclose(c.numpy(), ref_c.numpy(), atol=1e-5)
+    net.float()
+    assert net.activity.dtype == torch.float32 and net.best.dtype == F64
+    net.step(0.2, 0.0, 1.0)
+    net.to(torch.float64)
+    net.inject(3, 4, 5, 0.1)
+    net.step(0.2, 0.3, 1.0)
+    assert net.activity.dtype == F64
+    assert torch.isfinite(net.activity).all() and float(net.activity.sum()) > 0.9
+
+
+@pytest.mark.parametrize("method", ["numpy", "crop"])
+def test_state_dict_round_trips_activity_and_centre(method):
+    p = PoseCellParams()
+    a = PoseCellNetwork(p, dtype=F64, method=method)
+    for t in range(12):
+        if t == 5:
+            a.inject(2, 3, 30, 0.2)
+        a.step(0.7, 0.15, 1.0)
+    state = a.state_dict()
+    assert set(state) == {"activity", "best"}
+    b = PoseCellNetwork(p, dtype=F64, method=method)
+    b.load_state_dict(state)
+    assert torch.equal(b.centre(), a.centre())  # before any step: the saved centre
+    for _ in range(5):
+        ca, cb = a.step(-0.5, 0.3, 1.0), b.step(-0.5, 0.3, 1.0)
+        assert torch.equal(ca, cb)
+        assert torch.equal(a.activity, b.activity)
+
+
+@pytest.mark.parametrize("profile", ["openratslam", "project"])
+def test_numpy_step_equals_the_batched_torch_step(profile):
+    """One network in numpy and the same inputs as rows of a torch batch: the same
+    activity (rounding) and centres, with injections and moves across the wraps."""
+    p = PoseCellParams(pc_dim_xy=15) if profile == "openratslam" else _params(pc_dim_xy=15)
+    rng = np.random.default_rng(11)
+    b = 3
+    batch = PoseCellNetwork(p, b, dtype=F64)
+    singles = [PoseCellNetwork(p, dtype=F64, method="numpy") for _ in range(b)]
+    for t in range(60):
+        v = rng.uniform(-1.0, 1.0, b) * (2.5 if profile == "project" else 1.0)
+        w = rng.uniform(-1.2, 1.2, b)
+        if t % 9 == 4:
+            cells = rng.integers(0, 15, (3, b))
+            batch.inject(cells[0], cells[1], cells[2] % 36, 0.3)
+            for i, n in enumerate(singles):
+                n.inject(int(cells[0, i]), int(cells[1, i]), int(cells[2, i] % 36), 0.3)
+        cb = batch.step(v, w, 1.0)
+        for i, n in enumerate(singles):
+            ci = n.step(float(v[i]), float(w[i]), 1.0)
+            np.testing.assert_allclose(ci[0].numpy(), cb[i].numpy(), rtol=0, atol=1e-9)
+            np.testing.assert_allclose(
+                n.activity[0].numpy(), batch.activity[i].numpy(), rtol=0, atol=1e-12
+            )
