@@ -104,6 +104,52 @@ class PoseCellParams(Params):
         2.0, "pose-cell distance that makes a new experience", ge=0.0
     )
     pc_vt_restore: float = param(0.05, "decay relaxation per step", ge=0.0)
+    # Issue 12: OpenRatSLAM's exact behaviours (defaults) or the project's choices by name.
+    pc_decode: str = param(
+        "openratslam",
+        "packet centre decoding: openratslam (find_best: phasors at (i + 1) 2pi/n, minus one "
+        "cell; a centre on a cell comes out just below it) | exact (phasors at i 2pi/n)",
+        choices=("openratslam", "exact"),
+    )
+    vt_inject_rule: str = param(
+        "openratslam",
+        "which known templates inject energy: openratslam (all while fewer than 10 templates "
+        "exist, then all but the 10 most recent) | last_10 (never the 10 most recent)",
+        choices=("openratslam", "last_10"),
+    )
+    pc_axis: str = param(
+        "openratslam",
+        "path-integration axes: openratslam (layer k moves along (sin, cos)(k 2pi/TH) in "
+        "(x, y), heading 0 is +y) | math (along (cos, sin), heading 0 is +x)",
+        choices=("openratslam", "math"),
+    )
+    pc_wrap: str = param(
+        "openratslam",
+        "activity crossing the x/y wrap: openratslam (two edge cells of a layer lose what "
+        "crosses, as its wrap-back loops start at 1) | preserve_mass (all of it wraps)",
+        choices=("openratslam", "preserve_mass"),
+    )
+    pc_multi_cell: bool = param(
+        False,
+        "path integration over more than one cell per step (integer roll + bilinear "
+        "fraction); false: OpenRatSLAM's four-neighbour weights, exact up to one cell",
+    )
+
+    pc_engine: str = param(
+        "auto",
+        "how one CPU network steps: numpy (on the packet's crop, fastest at B = 1) | torch "
+        "(the batched methods) | auto (numpy for one CPU network). The same actions; float32 "
+        "rounding differs, so torch reproduces runs recorded before issue 12 bit for bit",
+        choices=("auto", "numpy", "torch"),
+    )
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        if self.pc_wrap == "openratslam" and self.pc_multi_cell:
+            raise ConfigError(
+                "pc_wrap='openratslam' (the reference's edge loss) is defined for one-cell "
+                "steps only: set pc_multi_cell=false or pc_wrap='preserve_mass'"
+            )
 
 
 @dataclass(frozen=True)
@@ -153,6 +199,11 @@ class VisualOdometryParams(Params):
 # docs/openratslam-fidelity.md gives every key's measured effect.
 PROFILES: dict[str, dict[str, Any]] = {
     "openratslam": {
+        "pc_decode": "openratslam",
+        "vt_inject_rule": "openratslam",
+        "pc_axis": "openratslam",
+        "pc_wrap": "openratslam",
+        "pc_multi_cell": False,
         "skip_first_odometry": True,
         "action_angle": "injection",
         "exp_relax": "on_action",
@@ -161,6 +212,11 @@ PROFILES: dict[str, dict[str, Any]] = {
         "exp_relax_order": "openratslam",
     },
     "torchratslam": {
+        "pc_decode": "exact",
+        "vt_inject_rule": "last_10",
+        "pc_axis": "math",
+        "pc_wrap": "preserve_mass",
+        "pc_multi_cell": True,
         "skip_first_odometry": False,
         "action_angle": "view",
         "exp_relax": "every_frame",
