@@ -156,6 +156,9 @@ def test_the_reference_behaviour_reproduces_the_trace_in_float64(name):
     bad = np.nonzero(got[:, 2] != f["action"])[0]
     assert bad.size == 0, f"actions differ on {bad.size} frames, first {bad[:5].tolist()}"
     act = f["action"] != 0
+    first = np.argmax(act)  # the first CREATE has no source: -1 here, the C++'s initial 0
+    assert got[first, 3] == -1 and f["src_exp_id"][first] == 0
+    act[first] = False
     np.testing.assert_array_equal(got[act, 3], f["src_exp_id"][act])
     np.testing.assert_array_equal(got[act, 4], f["current_exp_id"][act])
     assert_map_equal(np.asarray(slam.experience_map.poses), tr["exps"])
