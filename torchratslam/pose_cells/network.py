@@ -348,6 +348,7 @@ class PoseCellNetwork(nn.Module):
         self._arcs: list[tuple[int, int]] | None = None
         self._arcs_key: tuple[int, int] | None = None
         self._lookups: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+        self._geo: dict[tuple, dict[str, np.ndarray]] = {}
         self.reset()
 
     @property
@@ -523,6 +524,9 @@ class PoseCellNetwork(nn.Module):
         """
         b = self.batch_size
         if b == 1 and type(vtrans) is float and type(vrot) is float and type(dt) is float:
+            if self._numpy and self.activity.device.type == "cpu":
+                self.step_one(vtrans, vrot, dt)
+                return self._best.clone()
             vt, vr, d = np.array([vtrans]), np.array([vrot]), np.array([dt])  # fast path
             finite = math.isfinite(vtrans) and math.isfinite(vrot) and math.isfinite(dt)
         else:
@@ -537,13 +541,30 @@ class PoseCellNetwork(nn.Module):
         with torch.no_grad():
             if self._numpy and self.activity.device.type == "cpu":
                 self._step_numpy(float(trans[0]), float(rot[0]))
-                return self._best.clone()
+                return self._best.clone()  # (not reached with Python floats: step_one)
             if self.method == "crop":
                 peak = self._step_crop(trans, rot)
             else:
                 peak = self._step_full(trans, rot)
             self._best = self._decode(peak)
         return self._best.clone()
+
+    def step_one(self, vtrans: float, vrot: float, dt: float) -> tuple[float, float, float]:
+        """:meth:`step` for one network (``B == 1``) with Python floats in and out: the
+        numpy path without tensor wrapping where it applies (what :class:`PoseCells`
+        calls every frame).
+
+        Returns:
+            The packet centre ``(x, y, th)`` in cells.
+        """
+        if not (self._numpy and self.activity.device.type == "cpu" and self.batch_size == 1):
+            c = self.step(float(vtrans), float(vrot), float(dt))[0].tolist()
+            return (c[0], c[1], c[2])
+        if not (math.isfinite(vtrans) and math.isfinite(vrot) and math.isfinite(dt)):
+            raise InputError(f"odometry must be finite, got vtrans={vtrans}, vrot={vrot}, dt={dt}")
+        trans = vtrans * dt / self.params.pc_cell_x_size  # the same arithmetic as step()
+        rot = vrot * dt / (2.0 * math.pi / self.dims[2])
+        return self._step_numpy(trans, rot)
 
     def _step_full(self, trans: np.ndarray, rot: np.ndarray) -> torch.Tensor:
         if self.method == "conv3d":
@@ -875,6 +896,50 @@ class PoseCellNetwork(nn.Module):
             self._np_index[key] = idx
         return idx
 
+    def _geometry(self, backwards: bool) -> dict[str, np.ndarray]:
+        """Per global theta layer, the parts of the path integration that do not depend on
+        the distance (cached per direction of travel): ``coef_y``, ``coef_x`` (the move
+        per cell of translation), ``step_y``, ``step_x`` (one-cell: the neighbour's
+        shift), ``sin``, ``cos`` (of ``dir90``), ``src`` ``(TH, 2, 2)`` and ``corner``
+        ``(TH, 2)`` (the edge loss's cells as (y_is_last, x_is_last))."""
+        key = (bool(backwards), self._one_cell, self._swap_axes, self.dims[2])
+        g = self._geo.get(key)
+        if g is not None:
+            return g
+        n_t = self.dims[2]
+        layers = np.arange(n_t)
+        add = math.pi if backwards else 0.0
+        g = {}
+        if not self._one_cell:
+            direction = layers * (2.0 * math.pi / n_t) + add
+            cx, cy = np.cos(direction), np.sin(direction)
+            if not self._swap_axes:  # OpenRatSLAM: (sin, cos)
+                cx, cy = cy, cx
+            g["coef_y"], g["coef_x"] = cy, cx
+        else:  # OpenRatSLAM's path_integration, its own arithmetic
+            direction = layers * ((2.0 * math.pi) / n_t) + add
+            q = np.floor(direction * 2 / math.pi)
+            d90 = direction - q * math.pi / 2
+            sin, cos = np.sin(d90), np.cos(d90)  # a = v sin along +i, b = v cos along +j
+            tab = _QUADRANTS[np.remainder(q.astype(np.int64), 4)]  # (TH, 5, 2)
+            ax = 1 if self._swap_axes else 0  # "math": the mirror across the diagonal
+            di, dj = tab[:, 0, :], tab[:, 1, :]
+            i_on_y = di[:, ax] != 0  # +i moves along global y (else x)
+            sign_i = di[:, ax] + di[:, 1 - ax]  # the non-zero component
+            sign_j = dj[:, ax] + dj[:, 1 - ax]
+            g["step_y"] = np.where(i_on_y, sign_i, sign_j)
+            g["step_x"] = np.where(i_on_y, sign_j, sign_i)
+            g["coef_y"] = np.where(i_on_y, sin, cos)
+            g["coef_x"] = np.where(i_on_y, cos, sin)
+            g["sin"], g["cos"] = sin, cos
+            cells = tab[:, 2:, :]
+            if self._swap_axes:
+                cells = cells[..., ::-1]
+            g["src"] = np.ascontiguousarray(cells[:, :2, :])
+            g["corner"] = np.ascontiguousarray(cells[:, 2, :])
+        self._geo[key] = g
+        return g
+
     def _translation_plan(self, trans: np.ndarray, layers: np.ndarray) -> dict[str, np.ndarray]:
         """Per theta layer, how path integration moves it in (y, x).
 
@@ -889,48 +954,36 @@ class PoseCellNetwork(nn.Module):
             edge loss, also ``lost`` ``(B, T, 2)`` weights and ``src`` ``(B, T, 2, 2)``,
             ``corner`` ``(B, T, 2)`` cells as (y_is_last, x_is_last).
         """
-        n_t = self.dims[2]
-        tr = trans[:, None]
+        back = trans < 0
+        g0, g1 = self._geometry(False), self._geometry(True)
+        if not back.any() or back.all():
+            g = g1 if back.all() else g0
+            geo = {k: v[layers] for k, v in g.items()}
+        else:
+            geo = {}
+            for k, v in g0.items():
+                sel = back.reshape((-1,) + (1,) * (v.ndim))
+                geo[k] = np.where(sel, g1[k][layers], v[layers])
+        v = np.abs(trans)[:, None]
         plan: dict[str, np.ndarray] = {}
         if not self._one_cell:
-            direction = layers * (2.0 * math.pi / n_t) + np.where(tr < 0, math.pi, 0.0)
-            mag = np.abs(tr)
-            cx, cy = mag * np.cos(direction), mag * np.sin(direction)
-            if not self._swap_axes:  # OpenRatSLAM: (sin, cos)
-                cx, cy = cy, cx
-            for name, c in (("y", cy), ("x", cx)):
+            for name in ("y", "x"):
+                c = v * geo["coef_" + name]
                 fl = np.floor(c)
                 plan["shift_" + name] = fl.astype(np.int64)
                 plan["step_" + name] = fl.astype(np.int64) + 1
                 plan["w_" + name] = c - fl
             return plan
-        # OpenRatSLAM's path_integration, its own arithmetic
-        v = np.abs(tr)
-        direction = layers * ((2.0 * math.pi) / n_t) + np.where(tr < 0, math.pi, 0.0)
-        q = np.floor(direction * 2 / math.pi)
-        d90 = direction - q * math.pi / 2
-        a, b = v * np.sin(d90), v * np.cos(d90)  # along the rotated +i and +j
-        tab = _QUADRANTS[np.remainder(q.astype(np.int64), 4)]  # (B, T, 5, 2)
-        ax = 1 if self._swap_axes else 0  # "math": the mirror across the diagonal
-        di, dj = tab[..., 0, :], tab[..., 1, :]
-        i_on_y = di[..., ax] != 0  # +i moves along global y (else x)
-        sign_i = di[..., ax] + di[..., 1 - ax]  # the non-zero component
-        sign_j = dj[..., ax] + dj[..., 1 - ax]
         zero = np.zeros(layers.shape, dtype=np.int64)
         plan["shift_y"], plan["shift_x"] = zero, zero
-        plan["step_y"] = np.where(i_on_y, sign_i, sign_j)
-        plan["step_x"] = np.where(i_on_y, sign_j, sign_i)
-        plan["w_y"] = np.where(i_on_y, a, b)
-        plan["w_x"] = np.where(i_on_y, b, a)
+        plan["step_y"], plan["step_x"] = geo["step_y"], geo["step_x"]
+        plan["w_y"], plan["w_x"] = v * geo["coef_y"], v * geo["coef_x"]
         if self._edge_loss:
-            se = v * np.sin(d90) * (1.0 - v * np.cos(d90))
-            nw = v * np.cos(d90) * (1.0 - v * np.sin(d90))
+            sin, cos = geo["sin"], geo["cos"]
+            se = v * sin * (1.0 - v * cos)
+            nw = v * cos * (1.0 - v * sin)
             plan["lost"] = np.stack([se, nw], axis=-1)
-            cells = tab[..., 2:, :]
-            if self._swap_axes:
-                cells = cells[..., ::-1]
-            plan["src"] = cells[..., :2, :]
-            plan["corner"] = cells[..., 2, :]
+            plan["src"], plan["corner"] = geo["src"], geo["corner"]
         return plan
 
     def _np_translate(
@@ -968,6 +1021,10 @@ class PoseCellNetwork(nn.Module):
         cells of each layer (of ``src``, before the move) across the edge."""
         (sy, ly, _), (sx, lx, _) = box_y, box_x
         n = self.dims[0]
+        if not (
+            ((-sy) % n < ly or (n - 1 - sy) % n < ly) and ((-sx) % n < lx or (n - 1 - sx) % n < lx)
+        ):
+            return  # no corner of the ring inside the crop
         # local position of global cell 0 and n - 1 on each axis (or -1 outside the crop)
         pos = []
         for start, length in ((sy, ly), (sx, lx)):
@@ -1001,7 +1058,7 @@ class PoseCellNetwork(nn.Module):
         out += _roll0(a, s2) * w
         return out
 
-    def _step_numpy(self, trans: float, rot: float) -> None:
+    def _step_numpy(self, trans: float, rot: float) -> tuple[float, float, float]:
         """One step of a single CPU network in numpy, on the packet's crop."""
         p = self.params
         act = self.activity.detach().numpy()[0]
@@ -1030,8 +1087,10 @@ class PoseCellNetwork(nn.Module):
         ]
         circ = (boxes[0][2], boxes[1][2], boxes[2][2])
         self.last_crop = (boxes[0][1], boxes[1][1], boxes[2][1])
-        grid = np.ix_(idx[0], idx[1], idx[2])
-        crop = act[grid]
+        shape = (boxes[0][1], boxes[1][1], boxes[2][1])
+        flat = ((idx[0][:, None, None] * n_y + idx[1][None, :, None]) * n_x + idx[2]).reshape(-1)
+        act_flat = act.reshape(-1)
+        crop = act_flat.take(flat).reshape(shape)
         e = self._np_conv(crop, "e", circ)
         a = e - self._np_conv(e, "i", circ)
         a -= p.pc_global_inhib
@@ -1047,7 +1106,7 @@ class PoseCellNetwork(nn.Module):
             a = self._np_translate(a, trans, idx[0], boxes[1], boxes[2])
         if rot != 0:
             a = self._np_rotate(a, rot)
-        act[grid] = a
+        act_flat[flat] = a.reshape(-1)
         # the new non-zero arcs, from the crop (every other cell is zero)
         nz = a != 0
         t2 = nz.any(axis=2)
@@ -1071,9 +1130,9 @@ class PoseCellNetwork(nn.Module):
         hits = np.flatnonzero(a == top)
         _, ly, lx = a.shape
         kt, ky, kx = hits // (ly * lx), (hits // lx) % ly, hits % lx
-        flat = (idx[0][kt] * n_y + idx[1][ky]) * n_x + idx[2][kx]
-        peak = int(flat.min())
-        self._decode_np(act, peak)
+        cells = (idx[0][kt] * n_y + idx[1][ky]) * n_x + idx[2][kx]
+        peak = int(cells.min())
+        return self._decode_np(act, peak)
 
     def _decode_lookups(self, n: int) -> tuple[np.ndarray, np.ndarray]:
         """find_best's sin and cos lookups, ``(i + 1) 2 pi / n``, with its arithmetic."""
@@ -1084,37 +1143,43 @@ class PoseCellNetwork(nn.Module):
             self._lookups[n] = lk
         return lk
 
-    def _decode_np(self, act: np.ndarray, peak: int) -> None:
-        """The centre of one network (``act`` (T, Y, X)) around the flat ``peak``."""
+    def _decode_np(self, act: np.ndarray, peak: int) -> tuple[float, float, float]:
+        """The centre of one network (``act`` (T, Y, X)) around the flat ``peak``; also
+        written to :attr:`best`."""
         n_x, n_y, n_t = self.dims
         pt, py, px = peak // (n_y * n_x), (peak // n_x) % n_y, peak % n_x
         (wx, ex, _), (wy, ey, _), (wt, et, _) = self._rings()
         ix, iy, it = wx[px], wy[py], wt[pt]
-        cube = act[np.ix_(it, iy, ix)].astype(np.float64)
-        out = self.best.numpy()[0] if self.best.device.type == "cpu" else np.empty(3)
-        res = []
-        for sums, ring, phasor, n in (
-            (cube.sum(axis=(0, 1)), ix, ex, n_x),
-            (cube.sum(axis=(0, 2)), iy, ey, n_y),
-            (cube.sum(axis=(1, 2)), it, et, n_t),
-        ):
-            if self._cpp_decode:
-                res.append(self._cpp_position(sums, ring, n))
-            else:
-                v = np.angle((sums * phasor[ring]).sum())
+        flat = ((it[:, None, None] * n_y + iy[None, :, None]) * n_x + ix).reshape(-1)
+        w = len(ix)
+        cube = act.reshape(-1).take(flat).reshape(len(it), len(iy), w).astype(np.float64)
+        c2 = cube.sum(axis=0)
+        sums = (c2.sum(axis=0), c2.sum(axis=1), cube.sum(axis=(1, 2)))
+        rings = (ix, iy, it)
+        res: list[float] = []
+        if self._cpp_decode:
+            for sm, ring, n in zip(sums, rings, (n_x, n_y, n_t), strict=True):
+                res.append(self._cpp_position(sm, ring, n))
+        else:
+            for sm, ring, ph, n in zip(sums, rings, (ex, ey, et), (n_x, n_y, n_t), strict=True):
+                v = np.angle((sm * ph[ring]).sum())
                 pos = float(np.remainder(v * (n / (2.0 * math.pi)), float(n)))
                 res.append(pos - n if pos >= n else pos)
-        out[:] = res
-        if self.best.device.type != "cpu":
-            self.best.copy_(torch.from_numpy(out)[None])
+        centre = (res[0], res[1], res[2])
+        if self.best.device.type == "cpu":
+            self.best.numpy()[0] = centre
+        else:
+            self.best.copy_(torch.tensor([centre], dtype=torch.float64))
+        return centre
 
     def _cpp_position(self, sums: np.ndarray, ring: np.ndarray, n: int) -> float:
         """find_best on one axis: ``atan2`` of the (i + 1) phasor sums (in cell order),
         times ``n / 2 pi``, minus one cell, then wrapped into ``[0, n]``."""
         sin_l, cos_l = self._decode_lookups(n)
-        order = np.argsort(ring, kind="stable")
-        r, w = ring[order], sums[order]
-        s1 = float(np.cumsum(sin_l[r] * w)[-1])
+        start = int(np.argmin(ring))  # the window in cell order: it wraps at most once
+        r = np.concatenate((ring[start:], ring[:start])) if start else ring
+        w = np.concatenate((sums[start:], sums[:start])) if start else sums
+        s1 = float(np.cumsum(sin_l[r] * w)[-1])  # sequential, in cell order, as its loop
         s2 = float(np.cumsum(cos_l[r] * w)[-1])
         x = math.atan2(s1, s2) * n / (2.0 * math.pi) - 1.0
         while x < 0:
@@ -1374,8 +1439,7 @@ class PoseCells:
         Returns:
             The :class:`~torchratslam.graph.messages.Action` for the experience map.
         """
-        c = self.network.step(float(vtrans), float(vrot), float(dt))[0].tolist()
-        self._best = (c[0], c[1], c[2])
+        self._best = self.network.step_one(float(vtrans), float(vrot), float(dt))
         self._odo_update = True
         return self._decide()
 
