@@ -9,7 +9,9 @@ plus the experience-map paper's features (``torchratslam.graph.features``):
   the current experience to it; ``LINK`` links the current experience to an existing one
   (one link per pair, either direction) and makes it current; ``SET`` only makes it
   current. A link stores ``(d, heading, facing)`` relative to its source's orientation
-  and the elapsed time;
+  and a time: OpenRatSLAM's ``accum_delta_time_s``, which it never resets (the time
+  since the start of the run; ``exp_link_time="since_start"``), or the time since the
+  previous link (``"per_link"``, the project's choice);
 * :meth:`ExperienceMap.iterate` runs ``exp_loops`` passes of the configured backend
   (``exp_backend``) on :meth:`ExperienceMap.posegraph` and writes the poses back.
 
@@ -454,9 +456,13 @@ class ExperienceMap:
     ) -> int:
         """``CREATE``: new experience at current pose + accumulated delta, linked, current.
 
-        The first experience sits at ``(0, 0, wrap(accum_facing))``. Later ones at
+        The first experience sits at the accumulated ``(accum_x, accum_y,
+        wrap(accum_facing))`` and the accumulators run on (OpenRatSLAM, whose
+        ``on_set_experience(0, 0)`` returns early), or with ``exp_first_at_origin`` at
+        ``(0, 0, wrap(accum_facing))`` with the accumulators restarted there. Later ones at
         ``(x_cur + accum_x, y_cur + accum_y, wrap(accum_facing))`` with a link from the
-        current experience (measured from the accumulators, elapsed time reset).
+        current experience (measured from the accumulators; its time as
+        ``exp_link_time`` says).
 
         Returns:
             The new experience id.
@@ -514,7 +520,8 @@ class ExperienceMap:
 
         Nothing happens when ``dest`` is already current. Otherwise ``accum_x = accum_y
         = 0`` and ``accum_facing = wrap(th_dest + relative_rad)``; the elapsed time is
-        kept (OpenRatSLAM resets it only when a link is made). The move counts as a
+        kept (OpenRatSLAM never resets it; ``exp_link_time="per_link"`` restarts it when
+        a link is made). The move counts as a
         transition for Eq. 9 and, with ``exp_link_averaging``, is averaged into the link
         between the two experiences if there is one (Eq. 6).
         """
