@@ -57,9 +57,10 @@ def effects(name: str) -> list[dict]:
     out = []
     for label, change in _rows():
         slam = RatSLAM(load_config(tr["config"], **change), dtype=torch.float64)
-        acts: list[int] = []
-        slam.run(frames, progress=False, callback=lambda r: acts.append(int(r.action.kind)))
-        diff = np.nonzero(np.asarray(acts) != f["action"])[0]
+        steps: list = []
+        slam.run(frames, progress=False, callback=steps.append)
+        acts = np.array([int(r.action.kind) for r in steps])
+        diff = np.nonzero(acts != f["action"])[0]
         traj = slam.trajectory()
         ok = np.isfinite(traj[:, 3]) & (traj[:, 0] >= 1)
         poses = np.asarray(slam.experience_map.poses)
@@ -82,8 +83,10 @@ def main() -> None:
     names = sys.argv[1:] or ["loop", "turns", "templates"]
     for name in names:
         print(f"### {name}\n")
-        print("| run (float64) | actions differing (first) | experiences / links | ATE m | "
-              "max distance to the C++ map m |")
+        print(
+            "| run (float64) | actions differing (first) | experiences / links | ATE m | "
+            "max distance to the C++ map m |"
+        )
         print("|---|---|---|---|---|")
         for r in effects(name):
             first = f" ({r['first']})" if r["first"] is not None else ""
