@@ -685,6 +685,8 @@ class RatSLAM:
         ids = np.asarray(old_to_new, dtype=np.int64).reshape(-1)
         old = np.asarray(self._exp, dtype=np.int64)
         ok = (old >= 0) & (old < ids.size)
+        if not ok.any():  # nothing to re-point (e.g. no experience yet: frame 0 only)
+            return
         new = np.where(ok, ids[np.where(ok, old, 0)], old)
         self._exp[:] = [int(v) for v in new]
 
