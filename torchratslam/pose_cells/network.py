@@ -999,7 +999,8 @@ class PoseCellNetwork(nn.Module):
         shape = a.shape
         src = a
         for axis, name in ((2, "x"), (1, "y")):
-            base, step, w = plan["shift_" + name][0], plan["step_" + name][0], plan["w_" + name][0]
+            base, step = plan["shift_" + name][0], plan["step_" + name][0]
+            w = plan["w_" + name][0].astype(a.dtype, copy=False)
             flat = a.reshape(-1)
             s0 = a if not base.any() else flat[self._np_shift_index(shape, axis, base)]
             s1 = flat[self._np_shift_index(shape, axis, step)].reshape(shape)
