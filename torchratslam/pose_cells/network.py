@@ -213,7 +213,7 @@ def _quadrant_table() -> np.ndarray:
 _QUADRANTS = _quadrant_table()
 
 
-def _arc(mask: np.ndarray) -> tuple[int, int]:
+def _arc(mask: Any) -> tuple[int, int]:
     """``(start, length)`` of the shortest circular arc holding every True of ``mask``."""
     s, ln = _minimal_arcs(mask[None])
     return int(s[0]), int(ln[0])
@@ -356,7 +356,7 @@ class PoseCellNetwork(nn.Module):
         return self._np_state["crop"]
 
     @last_crop.setter
-    def last_crop(self, value: tuple[int, int, int]) -> None:
+    def last_crop(self, value: tuple[int, ...]) -> None:
         self._np_state["crop"] = tuple(value)
 
     @property
@@ -885,7 +885,7 @@ class PoseCellNetwork(nn.Module):
         st = self._np_state
         key = (self.activity.data_ptr(), self.activity._version)
         if st["arcs"] is None or st["key"] != key:
-            nz = act != 0
+            nz: np.ndarray = np.not_equal(act, 0)
             t2 = nz.any(axis=2)
             st["arcs"] = [_arc(t2.any(axis=1)), _arc(t2.any(axis=0)), _arc(nz.any(axis=(0, 1)))]
             st["key"] = key
@@ -1143,7 +1143,7 @@ class PoseCellNetwork(nn.Module):
             a = self._np_rotate(a, rot)
         act_flat[flat] = a.reshape(-1)
         # the new non-zero arcs, from the crop (every other cell is zero)
-        nz = a != 0
+        nz: np.ndarray = np.not_equal(a, 0)
         t2 = nz.any(axis=2)
         arcs = []
         for mask, (start, _ln, whole), n in zip(
