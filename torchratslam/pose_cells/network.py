@@ -886,7 +886,7 @@ class PoseCellNetwork(nn.Module):
         key = (self.activity.data_ptr(), self.activity._version)
         if st["arcs"] is None or st["key"] != key:
             nz: np.ndarray = np.not_equal(act, 0)
-            t2 = nz.any(axis=2)
+            t2 = np.asarray(nz.any(axis=2))
             st["arcs"] = [_arc(t2.any(axis=1)), _arc(t2.any(axis=0)), _arc(nz.any(axis=(0, 1)))]
             st["key"] = key
         return st["arcs"]
@@ -1144,7 +1144,7 @@ class PoseCellNetwork(nn.Module):
         act_flat[flat] = a.reshape(-1)
         # the new non-zero arcs, from the crop (every other cell is zero)
         nz: np.ndarray = np.not_equal(a, 0)
-        t2 = nz.any(axis=2)
+        t2 = np.asarray(nz.any(axis=2))
         arcs = []
         for mask, (start, _ln, whole), n in zip(
             (t2.any(axis=1), t2.any(axis=0), nz.any(axis=(0, 1))),
