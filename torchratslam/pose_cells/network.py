@@ -213,7 +213,7 @@ def _quadrant_table() -> np.ndarray:
 _QUADRANTS = _quadrant_table()
 
 
-def _arc(mask: np.ndarray) -> tuple[int, int]:
+def _arc(mask: Any) -> tuple[int, int]:
     """``(start, length)`` of the shortest circular arc holding every True of ``mask``."""
     s, ln = _minimal_arcs(mask[None])
     return int(s[0]), int(ln[0])
@@ -330,7 +330,6 @@ class PoseCellNetwork(nn.Module):
         self._gather_cache: dict[tuple, torch.Tensor] = {}
         self._occ: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
         self._occ_key: tuple[int, int] | None = None
-        self.last_crop: tuple[int, int, int] = (th, xy, xy)
         self.register_buffer(
             "best", torch.zeros(self.batch_size, 3, dtype=torch.float64, device=device)
         )
@@ -345,11 +344,28 @@ class PoseCellNetwork(nn.Module):
         # axis (th, y, x) valid while the buffer's (pointer, version) is _arcs_key
         self._np_mats: dict[tuple[str, int, bool], np.ndarray] = {}
         self._np_index: dict[tuple, np.ndarray] = {}
-        self._arcs: list[tuple[int, int]] | None = None
-        self._arcs_key: tuple[int, int] | None = None
+        # (a plain dict: nn.Module's __setattr__ costs microseconds per assignment)
+        self._np_state: dict[str, Any] = {"arcs": None, "key": None, "crop": (th, xy, xy)}
         self._lookups: dict[int, tuple[np.ndarray, np.ndarray]] = {}
         self._geo: dict[tuple, dict[str, np.ndarray]] = {}
         self.reset()
+
+    @property
+    def last_crop(self) -> tuple[int, int, int]:
+        """The box (theta, y, x cells) the last step computed on."""
+        return self._np_state["crop"]
+
+    @last_crop.setter
+    def last_crop(self, value: tuple[int, ...]) -> None:
+        self._np_state["crop"] = tuple(value)
+
+    @property
+    def _arcs(self) -> list[tuple[int, int]] | None:
+        return self._np_state["arcs"]
+
+    @_arcs.setter
+    def _arcs(self, value: list[tuple[int, int]] | None) -> None:
+        self._np_state["arcs"] = value
 
     @property
     def _best(self) -> torch.Tensor:
@@ -866,13 +882,14 @@ class PoseCellNetwork(nn.Module):
         return (mt @ out.reshape(t, y * x)).reshape(t, y, x)
 
     def _np_arcs(self, act: np.ndarray) -> list[tuple[int, int]]:
+        st = self._np_state
         key = (self.activity.data_ptr(), self.activity._version)
-        if self._arcs is None or self._arcs_key != key:
-            nz = act != 0
-            t2 = nz.any(axis=2)
-            self._arcs = [_arc(t2.any(axis=1)), _arc(t2.any(axis=0)), _arc(nz.any(axis=(0, 1)))]
-            self._arcs_key = key
-        return self._arcs
+        if st["arcs"] is None or st["key"] != key:
+            nz: np.ndarray = np.not_equal(act, 0)
+            t2 = np.asarray(nz.any(axis=2))
+            st["arcs"] = [_arc(t2.any(axis=1)), _arc(t2.any(axis=0)), _arc(nz.any(axis=(0, 1)))]
+            st["key"] = key
+        return st["arcs"]
 
     def _np_shift_index(
         self, shape: tuple[int, int, int], axis: int, shifts: np.ndarray
@@ -995,25 +1012,40 @@ class PoseCellNetwork(nn.Module):
         box_x: tuple[int, int, bool],
     ) -> np.ndarray:
         """Move every layer of the crop ``a`` (T, Y, X) along its heading."""
-        plan = self._translation_plan(np.array([trans]), layers[None])
+        g = self._geometry(trans < 0)
+        v = abs(trans)
+        plan: dict[str, np.ndarray] = {}
+        for name in ("y", "x"):
+            c = v * g["coef_" + name][layers]
+            if self._one_cell:
+                plan["shift_" + name] = np.zeros(len(layers), dtype=np.int64)
+                plan["step_" + name] = g["step_" + name][layers]
+                plan["w_" + name] = c
+            else:
+                fl = np.floor(c)
+                plan["shift_" + name] = fl.astype(np.int64)
+                plan["step_" + name] = plan["shift_" + name] + 1
+                plan["w_" + name] = c - fl
         shape = a.shape
         src = a
         for axis, name in ((2, "x"), (1, "y")):
-            base, step, w = plan["shift_" + name][0], plan["step_" + name][0], plan["w_" + name][0]
+            base, step = plan["shift_" + name], plan["step_" + name]
+            w = plan["w_" + name].astype(a.dtype, copy=False)
             flat = a.reshape(-1)
             s0 = a if not base.any() else flat[self._np_shift_index(shape, axis, base)]
             s1 = flat[self._np_shift_index(shape, axis, step)].reshape(shape)
             s0 = s0.reshape(shape)
             a = s0 + w[:, None, None] * (s1 - s0)
         if self._edge_loss:
-            self._np_edge_loss(a, src, plan, box_y, box_x)
+            self._np_edge_loss(a, src, trans, layers, box_y, box_x)
         return a
 
     def _np_edge_loss(
         self,
         out: np.ndarray,
         src: np.ndarray,
-        plan: dict[str, np.ndarray],
+        trans: float,
+        layers: np.ndarray,
         box_y: tuple[int, int, bool],
         box_x: tuple[int, int, bool],
     ) -> None:
@@ -1021,27 +1053,30 @@ class PoseCellNetwork(nn.Module):
         cells of each layer (of ``src``, before the move) across the edge."""
         (sy, ly, _), (sx, lx, _) = box_y, box_x
         n = self.dims[0]
-        if not (
-            ((-sy) % n < ly or (n - 1 - sy) % n < ly) and ((-sx) % n < lx or (n - 1 - sx) % n < lx)
-        ):
+        # local position of global cell 0 and n - 1 on each axis (-1: outside the crop)
+        py = [(0 - sy) % n, (n - 1 - sy) % n]
+        px = [(0 - sx) % n, (n - 1 - sx) % n]
+        py = [p if p < ly else -1 for p in py]
+        px = [p if p < lx else -1 for p in px]
+        if max(py) < 0 or max(px) < 0:
             return  # no corner of the ring inside the crop
-        # local position of global cell 0 and n - 1 on each axis (or -1 outside the crop)
-        pos = []
-        for start, length in ((sy, ly), (sx, lx)):
-            p = np.remainder(np.array([0, n - 1]) - start, n)
-            pos.append(np.where(p < length, p, -1))
-        if (pos[0] < 0).all() or (pos[1] < 0).all():
-            return  # no corner of the ring inside the crop
-        src_cells = plan["src"][0]  # (T, 2, 2) (is_last y, x)
-        corner = plan["corner"][0]  # (T, 2)
-        lost = plan["lost"][0]  # (T, 2)
+        yy = [p for p in py if p >= 0]
+        xx = [p for p in px if p >= 0]
+        if not src[:, yy][:, :, xx].any():
+            return  # every corner cell is empty: nothing crosses there
+        g = self._geometry(trans < 0)
+        v = abs(trans)
+        sin, cos = g["sin"][layers], g["cos"][layers]
+        lost = np.stack([v * sin * (1.0 - v * cos), v * cos * (1.0 - v * sin)], axis=1)
+        src_cells, corner = g["src"][layers], g["corner"][layers]  # (T, 2, 2), (T, 2)
+        pos_y, pos_x = np.array(py), np.array(px)
         k = np.arange(out.shape[0])
-        cy, cx = pos[0][corner[:, 0]], pos[1][corner[:, 1]]
+        cy, cx = pos_y[corner[:, 0]], pos_x[corner[:, 1]]
         take = np.zeros(out.shape[0], dtype=out.dtype)
         for m in range(2):  # the two dropped moves
-            yy, xx = pos[0][src_cells[:, m, 0]], pos[1][src_cells[:, m, 1]]
-            ok = (yy >= 0) & (xx >= 0)
-            take[ok] += lost[ok, m] * src[k[ok], yy[ok], xx[ok]]
+            sy_, sx_ = pos_y[src_cells[:, m, 0]], pos_x[src_cells[:, m, 1]]
+            ok = (sy_ >= 0) & (sx_ >= 0)
+            take[ok] += lost[ok, m] * src[k[ok], sy_[ok], sx_[ok]]
         ok = (cy >= 0) & (cx >= 0) & (take != 0)
         np.subtract.at(out, (k[ok], cy[ok], cx[ok]), take[ok])
 
@@ -1086,7 +1121,7 @@ class PoseCellNetwork(nn.Module):
             for (s, ln, _), n in zip(boxes, (n_t, n_y, n_x), strict=True)
         ]
         circ = (boxes[0][2], boxes[1][2], boxes[2][2])
-        self.last_crop = (boxes[0][1], boxes[1][1], boxes[2][1])
+        self._np_state["crop"] = (boxes[0][1], boxes[1][1], boxes[2][1])
         shape = (boxes[0][1], boxes[1][1], boxes[2][1])
         flat = ((idx[0][:, None, None] * n_y + idx[1][None, :, None]) * n_x + idx[2]).reshape(-1)
         act_flat = act.reshape(-1)
@@ -1108,8 +1143,8 @@ class PoseCellNetwork(nn.Module):
             a = self._np_rotate(a, rot)
         act_flat[flat] = a.reshape(-1)
         # the new non-zero arcs, from the crop (every other cell is zero)
-        nz = a != 0
-        t2 = nz.any(axis=2)
+        nz: np.ndarray = np.not_equal(a, 0)
+        t2 = np.asarray(nz.any(axis=2))
         arcs = []
         for mask, (start, _ln, whole), n in zip(
             (t2.any(axis=1), t2.any(axis=0), nz.any(axis=(0, 1))),
@@ -1124,7 +1159,7 @@ class PoseCellNetwork(nn.Module):
                 arcs.append(
                     ((start + int(on[0])) % n, int(on[-1] - on[0]) + 1) if on.size else (0, 0)
                 )
-        self._arcs = arcs
+        self._np_state["arcs"] = arcs
         # the most active cell; ties go to the lowest global (th, y, x) index
         top = a.max()
         hits = np.flatnonzero(a == top)
@@ -1260,7 +1295,7 @@ class PoseCellNetwork(nn.Module):
             act = self.activity.detach().numpy()[0]
             key = (self.activity.data_ptr(), self.activity._version)
             act[it[0], iy[0], ix[0]] += e[0]
-            if e[0] != 0 and self._arcs is not None and self._arcs_key == key:
+            if e[0] != 0 and self._arcs is not None and self._np_state["key"] == key:
                 cell = (int(it[0]), int(iy[0]), int(ix[0]))
                 self._arcs = [
                     _arc_with(arc, c, n)

@@ -653,3 +653,24 @@ def test_numpy_step_equals_the_batched_torch_step(profile):
             np.testing.assert_allclose(
                 n.activity[0].numpy(), batch.activity[i].numpy(), rtol=0, atol=1e-12
             )
+
+
+@pytest.mark.skipif(not torch.cuda.is_available(), reason="needs a CUDA device")
+@pytest.mark.parametrize("profile", ["openratslam", "project"])
+def test_to_cuda_steps_like_the_cpu_and_loads_back(profile):
+    p = PoseCellParams() if profile == "openratslam" else _params()
+    cpu = PoseCellNetwork(p, dtype=F64)
+    gpu = PoseCellNetwork(p, dtype=F64)
+    for n in (cpu, gpu):
+        n.step(0.5, 0.1, 1.0)
+    gpu.to("cuda")
+    assert gpu.activity.is_cuda and gpu.best.is_cuda and gpu.best.dtype == F64
+    for t in range(30):
+        for n in (cpu, gpu):
+            if t == 10:
+                n.inject(3, 17, 4, 0.3)
+            c = n.step(0.8, -0.3, 1.0)
+        np.testing.assert_allclose(c.cpu().numpy(), cpu.centre().numpy(), rtol=0, atol=1e-9)
+    back = PoseCellNetwork(p, dtype=F64)
+    back.load_state_dict({k: v.cpu() for k, v in gpu.state_dict().items()})
+    np.testing.assert_allclose(back.centre().numpy(), cpu.centre().numpy(), atol=1e-9)
