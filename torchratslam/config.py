@@ -4,6 +4,10 @@ Keys are named exactly as in OpenRatSLAM (``shared/reference/parameters.md``); a
 that is absent takes OpenRatSLAM's default. The key space is flat, as in OpenRatSLAM's
 own config files: :func:`load_config` routes each key to the module that owns it.
 
+Behaviour profiles (``behaviour: openratslam``, the default, or ``torchratslam``) set
+the keys of :data:`PROFILES` that a config does not set itself: OpenRatSLAM exactly, or
+the project's own choices (``docs/openratslam-fidelity.md``).
+
 Example:
     >>> from torchratslam.config import load_config
     >>> cfg = load_config("configs/virtual_tour.yaml")
