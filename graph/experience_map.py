@@ -149,6 +149,7 @@ class ExperienceMap:
         self._eidx: dict[tuple[int, int], int] = {}
         self._g = nx.DiGraph()
         self._dirty_edges: set[int] = set()  # links whose graph attributes are stale
+        self._dirty_nodes: set[int] = set()  # experiences whose graph attributes are stale
         self._poses_dirty = False
         self._order: np.ndarray | None = None
         self._links_version = 0  # bumped by every change of the links
@@ -201,6 +202,11 @@ class ExperienceMap:
         behaviour, confidence``. Treat it as read-only: change the map through the
         methods so the arrays stay in sync.
         """
+        if self._dirty_nodes:
+            nodes = self._g.nodes
+            for i in sorted(self._dirty_nodes):
+                nodes[i].update(self._node_attrs(i))
+            self._dirty_nodes.clear()
         if self._dirty_edges:
             self._flush_edges()
         if self._poses_dirty:
@@ -244,9 +250,11 @@ class ExperienceMap:
         Returns:
             The new experience id (= its row).
         """
-        pose = np.array([x, y, _wrap(float(th))], dtype=np.float64)
+        pose = (float(x), float(y), _wrap(float(th)))
         pcv = np.asarray(pc, dtype=np.float64).reshape(-1)
-        if pcv.shape != (3,) or not (np.all(np.isfinite(pose)) and np.all(np.isfinite(pcv))):
+        if pcv.shape != (3,) or not (
+            all(map(math.isfinite, pose)) and all(map(math.isfinite, pcv.tolist()))
+        ):
             raise InputError(
                 f"experience needs finite x, y, th and 3 pose-cell coordinates, got {pose}, {pcv}"
             )
@@ -264,7 +272,8 @@ class ExperienceMap:
         self._t[i] = float(t)
         self._n = need
         self._version += 1
-        self._g.add_node(i, **self._node_attrs(i))
+        self._g.add_node(i)  # its attributes are written when the graph is read
+        self._dirty_nodes.add(i)
         return i
 
     def _node_attrs(self, i: int) -> dict[str, Any]:
@@ -363,7 +372,8 @@ class ExperienceMap:
         self._behaviour[k] = int(behaviour)
         self._e = need
         self._eidx[(src, dst)] = k
-        self._g.add_edge(src, dst, **self._edge_attrs(k))
+        self._g.add_edge(src, dst)  # its attributes are written when the graph is read
+        self._dirty_edges.add(k)
         self._order = None
         return True
 
@@ -571,20 +581,23 @@ class ExperienceMap:
         direction) counts a traversal.
         """
         k_pair = self.link_index(src, dst)
-        out = [self._eidx[(src, v)] for v in self._g.successors(src)]
-        rows = np.array(out, dtype=np.int64)
-        rows = rows[self._behaviour[rows] == behaviour] if len(rows) else rows
-        self._counts[rows, 2] += 1
-        self._counts[rows[self._dst[rows] == dst], 1] += 1
+        # the links leaving src (a node's few out-links, not the map's links)
+        eidx, beh, dsts, counts = self._eidx, self._behaviour, self._dst, self._counts
+        out = [eidx[(src, v)] for v in self._g.successors(src)]
+        rows = [k for k in out if beh[k] == behaviour]
+        for k in rows:
+            counts[k, 2] += 1
+            if dsts[k] == dst:
+                counts[k, 1] += 1
         if k_pair >= 0:
-            self._counts[k_pair, 0] += 1
-        touched = set(rows.tolist()) | ({k_pair} if k_pair >= 0 else set())
-        for k in touched:
-            self._sync_edge(k)
+            counts[k_pair, 0] += 1
+            self._dirty_edges.add(k_pair)
+        self._dirty_edges.update(rows)
         thr = self.params.exp_link_confidence_threshold
-        if thr > 0.0 and len(rows):
-            conf = link_confidence(self._counts[rows, 1], self._counts[rows, 2])
-            doomed = [(src, int(v)) for v in self._dst[rows[conf < thr]]]
+        if thr > 0.0 and rows:
+            sel = np.array(rows, dtype=np.int64)
+            conf = link_confidence(self._counts[sel, 1], self._counts[sel, 2])
+            doomed = [(src, int(v)) for v in self._dst[sel[conf < thr]]]
             for a, b in doomed:
                 self.remove_link(a, b)
 
