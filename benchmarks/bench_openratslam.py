@@ -86,7 +86,8 @@ def _one_set(build: Path, ds, tmp: Path, rounds: int, quick: bool) -> None:
     gt = np.stack([g["x"], g["y"]], 1)
     for b in PROFILES:  # warm-up: first imports, numba's compiled sweep loaded
         run_py(cfg, frames[:60], b)
-    cpp_runs, py_runs = [], {b: [] for b in PROFILES}
+    cpp_runs: list[dict] = []
+    py_runs: dict[str, list[dict]] = {b: [] for b in PROFILES}
     for i in range(rounds):
         cpp_runs.append(run_cpp(build, data, tmp / f"cpp{i}"))
         for b in PROFILES:
