@@ -664,13 +664,19 @@ class ExperienceMap:
         """Relax the map: ``exp_loops`` passes of the backend, poses written back.
 
         A map with fewer than two experiences or no link is left as it is, and so is
-        every map when ``exp_loops`` is 0 and the backend is the alpha rule. With the
-        alpha backend a relaxation whose first pass moves nothing by more than
-        :attr:`relax_tol` (relative) stops there (the map is at the sweep's fixed point
-        to rounding), and later calls are skipped until poses or links change. This is
-        a deliberate deviation from always running ``exp_loops`` passes: the map differs
-        from the always-run one by rounding noise only (tested to 1e-9); set
-        ``relax_tol = 0`` to disable it.
+        every map when ``exp_loops`` is 0 and the backend is the alpha rule.
+
+        With ``exp_backend="alpha"`` and ``exp_relax_order="openratslam"`` (the
+        defaults) this is OpenRatSLAM's ``iterate()``, compiled, in place: the links in
+        its order, its arithmetic; a pass that changes nothing ends the relaxation and
+        later calls are skipped until poses or links change (exact: the result is
+        bit-identical to running every pass). With ``exp_relax_order="colour"`` a
+        relaxation whose first pass moves nothing by more than :attr:`relax_tol`
+        (relative) stops there (the map is at the sweep's fixed point to rounding), and
+        later calls are skipped until poses or links change. This is a deliberate
+        deviation from always running ``exp_loops`` passes: the map differs from the
+        always-run one by rounding noise only (tested to 1e-9); set ``relax_tol = 0`` to
+        disable it.
         """
         loops = self.params.exp_loops
         alpha = self.params.exp_backend.startswith("alpha")
