@@ -31,6 +31,10 @@ demo: $(STAMP)
 test: $(STAMP)
 	$(BIN)/python -m pytest -q -p no:cacheprovider
 
+# OpenRatSLAM's C++ for the side-by-side table: make bench OPENRATSLAM_BUILD=/path/to/build
+# (the folder holding ratslam_driver; default: build/openratslam if it exists)
+export OPENRATSLAM_BUILD
+
 bench: $(STAMP)
 	$(BIN)/python -m benchmarks
 

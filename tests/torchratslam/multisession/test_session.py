@@ -92,7 +92,9 @@ def test_session2_merges_with_session1_and_retraverses_without_new_experiences(
     assert np.array_equal(st.templates[: session1_map.n_templates], session1_map.templates)
     # the trajectory is in the merged map's frame: no frame refers to a dropped id
     traj = ms.trajectory()
-    assert np.isfinite(traj[:, 3:]).all() and traj[:, 2].max() < st.n_experiences
+    # (frame 0 has no experience: OpenRatSLAM's first action comes at frame 1)
+    assert traj[0, 2] == -1 and np.isfinite(traj[1:, 3:]).all()
+    assert traj[:, 2].max() < st.n_experiences
 
 
 @pytest.mark.slow
@@ -110,7 +112,9 @@ def test_multisession_map_has_as_many_experiences_as_the_continuous_single_sessi
     n_single = state_from_slam(single).n_experiences
     n_multi = ms.get_map().n_experiences
     assert n_single > 20
-    assert abs(n_multi - n_single) <= 0.02 * n_single
+    # within 2 %, or one experience: each session skips its first odometry message
+    # (OpenRatSLAM's behaviour), the continuous run only once
+    assert abs(n_multi - n_single) <= max(1, 0.02 * n_single)
     m = ms.get_map().exp_pose[:, :2]
     s = state_from_slam(single).exp_pose[:, :2]
     lap = tour.routes["ellipse"].length
