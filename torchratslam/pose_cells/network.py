@@ -999,6 +999,26 @@ class PoseCellNetwork(nn.Module):
         """Move every layer of the crop ``a`` (T, Y, X) along its heading."""
         g = self._geometry(trans < 0)
         v = abs(trans)
+        if self._one_cell:  # per crop: the weights per cell of travel and gather indices
+            key = (trans < 0, a.shape, int(layers[0]), a.dtype.char)
+            crop_geo = self._np_index.get(key)
+            if crop_geo is None:
+                crop_geo = (
+                    g["coef_x"][layers].astype(a.dtype)[:, None, None],
+                    g["coef_y"][layers].astype(a.dtype)[:, None, None],
+                    self._np_shift_index(a.shape, 2, g["step_x"][layers]),
+                    self._np_shift_index(a.shape, 1, g["step_y"][layers]),
+                )
+                self._np_index[key] = crop_geo
+            cx, cy, ix, iy = crop_geo
+            src = a
+            s1 = a.reshape(-1).take(ix).reshape(a.shape)
+            a = a + (v * cx) * (s1 - a)
+            s1 = a.reshape(-1).take(iy).reshape(a.shape)
+            a = a + (v * cy) * (s1 - a)
+            if self._edge_loss:
+                self._np_edge_loss(a, src, trans, layers, box_y, box_x)
+            return a
         plan: dict[str, np.ndarray] = {}
         for name in ("y", "x"):
             c = v * g["coef_" + name][layers]
