@@ -328,7 +328,7 @@ class PoseCellNetwork(nn.Module):
         # numpy path: matrices, gather indices, and the non-zero arcs (start, length) per
         # axis (th, y, x) valid while the buffer's (pointer, version) is _arcs_key
         self._np_mats: dict[tuple[str, int, bool], np.ndarray] = {}
-        self._np_index: dict[tuple, np.ndarray] = {}
+        self._np_index: dict[tuple, Any] = {}  # index arrays and per-crop (coef, index) tuples
         # (a plain dict: nn.Module's __setattr__ costs microseconds per assignment)
         self._np_state: dict[str, Any] = {"arcs": None, "key": None, "crop": (th, xy, xy)}
         self._lookups: dict[int, tuple[np.ndarray, np.ndarray]] = {}
