@@ -1003,9 +1003,11 @@ class PoseCellNetwork(nn.Module):
             key = (trans < 0, a.shape, int(layers[0]), a.dtype.char)
             crop_geo = self._np_index.get(key)
             if crop_geo is None:
+                # the coefficients stay float64: the weight v * coef is rounded to the
+                # activity's dtype once, as on the general path (float32 bit for bit)
                 crop_geo = (
-                    g["coef_x"][layers].astype(a.dtype)[:, None, None],
-                    g["coef_y"][layers].astype(a.dtype)[:, None, None],
+                    g["coef_x"][layers][:, None, None],
+                    g["coef_y"][layers][:, None, None],
                     self._np_shift_index(a.shape, 2, g["step_x"][layers]),
                     self._np_shift_index(a.shape, 1, g["step_y"][layers]),
                 )
@@ -1013,9 +1015,9 @@ class PoseCellNetwork(nn.Module):
             cx, cy, ix, iy = crop_geo
             src = a
             s1 = a.reshape(-1).take(ix).reshape(a.shape)
-            a = a + (v * cx) * (s1 - a)
+            a = a + (v * cx).astype(a.dtype, copy=False) * (s1 - a)
             s1 = a.reshape(-1).take(iy).reshape(a.shape)
-            a = a + (v * cy) * (s1 - a)
+            a = a + (v * cy).astype(a.dtype, copy=False) * (s1 - a)
             if self._edge_loss:
                 self._np_edge_loss(a, src, trans, layers, box_y, box_x)
             return a
