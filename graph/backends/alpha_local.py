@@ -27,7 +27,7 @@ import math
 import numpy as np
 from torchratslam.graph.backends.alpha import _check
 from torchratslam.graph.errors import ConfigError
-from torchratslam.graph.geometry import TWO_PI
+from torchratslam.graph.geometry import wrap_angle
 from torchratslam.graph.posegraph import PoseGraph
 
 __all__ = ["AlphaLocalBackend"]
@@ -215,7 +215,7 @@ class AlphaLocalBackend:
         out = self.relax_inplace(
             p, src, dst, link, passes=passes, correction=correction, tol=tol, changed=changed
         )
-        out[:, 2] = np.remainder(out[:, 2] + math.pi, TWO_PI) - math.pi
+        out[:, 2] = wrap_angle(out[:, 2])
         self._last = out.copy()
         self._edge_prefix = pg.edges.copy()
         return out
