@@ -211,6 +211,7 @@ PROFILES: dict[str, dict[str, Any]] = {
         "pc_axis": "openratslam",
         "pc_wrap": "openratslam",
         "pc_multi_cell": False,
+        "pc_engine": "auto",
         "skip_first_odometry": True,
         "action_angle": "injection",
         "exp_relax": "on_action",
@@ -224,6 +225,7 @@ PROFILES: dict[str, dict[str, Any]] = {
         "pc_axis": "math",
         "pc_wrap": "preserve_mass",
         "pc_multi_cell": True,
+        "pc_engine": "torch",  # the torch step's float32 rounding, as recorded before
         "skip_first_odometry": False,
         "action_angle": "view",
         "exp_relax": "every_frame",
