@@ -698,6 +698,8 @@ class ExperienceMap:
             self._version += 1
             if ran < loops:  # a pass changed nothing: the map is at its fixed point
                 self._fixed_at = (self._version, id(self.params), id(backend))
+            else:
+                self._log_not_converged(loops)
             return
         relax_inplace = getattr(backend, "relax_inplace", None)
         if callable(relax_inplace):
@@ -734,7 +736,11 @@ class ExperienceMap:
         self._version += 1
         if getattr(backend, "last_converged", False):
             self._fixed_at = (self._version, id(self.params), id(backend))
-        elif alpha and log.isEnabledFor(logging.DEBUG):
+        elif alpha:
+            self._log_not_converged(loops)
+
+    def _log_not_converged(self, loops: int) -> None:
+        if log.isEnabledFor(logging.DEBUG):
             log.debug(
                 "relaxation: %d passes of %r did not reach a fixed point (%d experiences)",
                 loops,
