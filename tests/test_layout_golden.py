@@ -19,11 +19,9 @@ ROOT = Path(__file__).resolve().parent.parent
 GOLDEN = ROOT / "tests" / "data" / "layout_golden"
 
 #: Config overrides that select the behaviour the goldens were recorded with (the
-#: project's own pre-issue-12 behaviour, the "torchratslam" profile). pc_engine=torch
-#: (also set by that profile): the pose cells' batched torch step, whose float32 rounding
-#: the goldens were recorded with (the numpy step takes the same actions, rounding differs
-#: in the last bits).
-BEHAVIOUR_OVERRIDES: list[str] = ["behaviour=torchratslam", "pc_engine=torch"]
+#: project's own pre-issue-12 behaviour: the "torchratslam" profile, which also picks
+#: the pose cells' batched torch step whose float32 rounding the goldens were made with).
+BEHAVIOUR_OVERRIDES: list[str] = ["behaviour=torchratslam"]
 
 RUNS = [("virtual_tour", "virtual_tour"), ("lab_tour", "lab_tour"), ("irat_like", "irat")]
 
