@@ -35,6 +35,10 @@ test: $(STAMP)
 fuzz: $(STAMP)
 	TORCHRATSLAM_FUZZ_PROFILE=fuzz $(BIN)/python -m pytest -q -p no:cacheprovider tests/torchratslam/test_fuzz.py
 
+# OpenRatSLAM's C++ for the side-by-side table: make bench OPENRATSLAM_BUILD=/path/to/build
+# (the folder holding ratslam_driver; default: build/openratslam if it exists)
+export OPENRATSLAM_BUILD
+
 bench: $(STAMP)
 	$(BIN)/python -m benchmarks
 

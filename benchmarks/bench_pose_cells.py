@@ -10,9 +10,17 @@ Methods (``PoseCellNetwork(method=...)``):
 
 * ``conv3d``: circular 3D convolution (``F.pad(mode="circular")`` + ``F.conv3d``);
 * ``separable``: three 1D circular convolutions per kernel, as small matrix products;
-* ``crop`` (the default): ``separable`` on a box around the packet plus a halo, exact
-  because every cell outside it is zero; falls back to ``separable`` when the box is
-  not small.
+* ``crop``: ``separable`` on a box around the packet plus a halo, exact because every
+  cell outside it is zero; falls back to ``separable`` when the box is not small;
+* ``numpy`` (the default for one CPU network): the crop in numpy, with a smaller halo
+  (the excitation's reach) and no tensor wrapping.
+
+With ``OPENRATSLAM_BUILD`` set to a build of ``shared/tools/openratslam`` (holding
+``ratslam_driver``), it also runs OpenRatSLAM's C++ side by side on the same data: the
+project's simulated loop tour with a 21x21x36 network, C++ and torchratslam alternated,
+per-frame pose-cell milliseconds (C++: the driver's own ``pc_ms``, on_view_template +
+on_odo + get_action; torchratslam: ``on_view_template`` + ``on_odometry``), and the
+median of the per-pair ratios of the means.
 
 The C++ reference (OpenRatSLAM) needs about 0.61 ms per step for 21x21x36 (B=1).
 ``BENCH_QUICK=1`` takes fewer steps and skips ``conv3d`` for the largest cases. The
@@ -22,17 +30,23 @@ default, ``method="auto"``, picks ``crop`` or ``separable`` per network size and
 from __future__ import annotations
 
 import os
+import subprocess
+import sys
+import tempfile
 import time
+from pathlib import Path
+from typing import Any
 
 import numpy as np
 import torch
 
 from torchratslam.config import PoseCellParams
-from torchratslam.pose_cells.network import PoseCellNetwork
+from torchratslam.messages import ViewMatch
+from torchratslam.pose_cells.network import PoseCellNetwork, PoseCells
 
 SIZES = (11, 21, 30, 80)
 BATCHES = (1, 32)
-METHODS = ("conv3d", "separable", "crop")
+METHODS = ("conv3d", "separable", "crop", "numpy")
 REFERENCE_MS_21 = 0.61
 
 
@@ -81,8 +95,11 @@ def measure(quick: bool = False) -> list[dict]:
     rows = []
     for xy in SIZES:
         for batch in BATCHES:
-            auto = PoseCellNetwork(PoseCellParams(pc_dim_xy=xy, pc_dim_th=36), batch).method
+            auto_net = PoseCellNetwork(PoseCellParams(pc_dim_xy=xy, pc_dim_th=36), batch)
+            auto = "numpy" if auto_net._numpy else auto_net.method
             for method in METHODS:
+                if method == "numpy" and batch > 1:
+                    continue
                 if quick and method == "conv3d" and xy * batch > 30 * 32:
                     continue
                 net, odo = _network(xy, batch, method)
@@ -102,9 +119,136 @@ def measure(quick: bool = False) -> list[dict]:
     return rows
 
 
+def _openratslam_txt(cfg: Any, path: Path) -> None:
+    """An OpenRatSLAM ``[ratslam]`` config from a torchratslam config (numbers only;
+    OpenRatSLAM reads the kernel variances as int)."""
+    lines = ["[ratslam]"]
+    for k, v in cfg.to_flat().items():
+        if isinstance(v, str):
+            continue
+        if k in ("pc_w_e_var", "pc_w_i_var"):
+            v = int(v)
+        lines.append(f"{k}={int(v) if isinstance(v, bool) else v}")
+    path.write_text("\n".join(lines) + "\n")
+
+
+def _replay_ms(cfg: Any, frames: dict[str, np.ndarray], odo: np.ndarray, dtype: Any):
+    """torchratslam's pose cells on the C++ run's (template, angle) sequence: per-frame
+    ms (frames >= 1) and the actions."""
+    pc = PoseCells(cfg.pose_cells, dtype=dtype)
+    ms, acts = [], []
+    t = odo[:, 0]
+    for k in range(len(frames["vt_id"])):
+        match = ViewMatch(
+            template_id=int(frames["vt_id"][k]), relative_rad=float(frames["vt_rad"][k])
+        )
+        t0 = time.perf_counter()
+        pc.on_view_template(match)
+        act = 0
+        if k > 0:
+            act = int(
+                pc.on_odometry(float(odo[k, 1]), float(odo[k, 2]), float(t[k] - t[k - 1])).kind
+            )
+        ms.append((time.perf_counter() - t0) * 1e3)
+        acts.append(act)
+    return np.array(ms[1:]), np.array(acts)
+
+
+def side_by_side(build: Path, pairs: int = 3, frames_n: int = 700) -> None:
+    """OpenRatSLAM's pose cells (its driver's pc_ms) against torchratslam's, same data."""
+    from torchratslam.config import load_config
+
+    driver = build / "ratslam_driver"
+    cfg = load_config(
+        "lab_tour",
+        pc_dim_xy=21,
+        pc_dim_th=36,
+        pc_cell_x_size=0.25,
+        pc_vt_inject_energy=0.15,
+        exp_delta_pc_threshold=2.0,
+    )
+    with tempfile.TemporaryDirectory() as tmp:
+        root = Path(tmp)
+        subprocess.run(
+            [
+                sys.executable,
+                "-m",
+                "torchratslam",
+                "simulate",
+                "loop",
+                "--out",
+                str(root / "data"),
+                "--max-frames",
+                str(frames_n),
+                "--quiet",
+            ],
+            check=True,
+            capture_output=True,
+        )
+        _openratslam_txt(cfg, root / "config.txt")
+        odo = np.loadtxt(root / "data" / "odometry.csv", delimiter=",", skiprows=1, ndmin=2)
+        rows = []
+        for i in range(pairs):
+            out = root / f"cpp{i}"
+            out.mkdir()
+            with open(out / "stdout.log", "w") as log:
+                subprocess.run(
+                    [str(driver), str(root / "config.txt"), str(root / "data"), str(out)],
+                    check=True,
+                    stdout=log,
+                    stderr=subprocess.DEVNULL,
+                )
+            with open(out / "frames.csv") as f:
+                head = f.readline().strip().split(",")
+            a = np.loadtxt(out / "frames.csv", delimiter=",", skiprows=1, ndmin=2)
+            fr = {h: a[:, j] for j, h in enumerate(head)}
+            cpp = fr["pc_ms"][1:]
+            row = {"cpp": cpp}
+            for name, dt in (("f64", torch.float64), ("f32", torch.float32)):
+                ms, acts = _replay_ms(cfg, fr, odo, dt)
+                row[name], row[name + "_same"] = ms, int((acts == fr["action"]).sum())
+            rows.append(row)
+    n = len(rows[0]["cpp"]) + 1
+    print(
+        f"\nside by side, pose cells only, 21x21x36, loop tour {n} frames, {pairs} alternated pairs"
+    )
+    print("(ms per frame, mean / median over frames >= 1; ratio = C++ mean / torchratslam mean)\n")
+    print(
+        "| run | OpenRatSLAM C++ | torchratslam f64 | ratio | torchratslam f32 | ratio "
+        "| actions equal f64 / f32 |"
+    )
+    print("|---|---|---|---|---|---|---|")
+    r64, r32, m64, m32 = [], [], [], []
+    for i, r in enumerate(rows):
+        r64.append(r["cpp"].mean() / r["f64"].mean())
+        r32.append(r["cpp"].mean() / r["f32"].mean())
+        m64.append(np.median(r["cpp"]) / np.median(r["f64"]))
+        m32.append(np.median(r["cpp"]) / np.median(r["f32"]))
+        print(
+            f"| {i} | {r['cpp'].mean():.3f} / {np.median(r['cpp']):.3f} | "
+            f"{r['f64'].mean():.3f} / {np.median(r['f64']):.3f} | {r64[-1]:.2f}x | "
+            f"{r['f32'].mean():.3f} / {np.median(r['f32']):.3f} | {r32[-1]:.2f}x | "
+            f"{r['f64_same']}/{n} / {r['f32_same']}/{n} |"
+        )
+    print(
+        f"\nmedian of per-pair ratios: float64 {np.median(r64):.2f}x, "
+        f"float32 {np.median(r32):.2f}x "
+        "(> 1: torchratslam's pose cells are faster); of the per-frame medians: "
+        f"float64 {np.median(m64):.2f}x, float32 {np.median(m32):.2f}x"
+    )
+
+
 def main() -> None:
     torch.set_num_threads(1)
     quick = os.environ.get("BENCH_QUICK", "") not in ("", "0")
+    build = os.environ.get("OPENRATSLAM_BUILD", "")
+    if build and (Path(build) / "ratslam_driver").exists():
+        side_by_side(Path(build), pairs=2 if quick else 3)
+    else:
+        print(
+            "(no OpenRatSLAM side by side: build it with shared/tools/openratslam/build.sh "
+            "and set OPENRATSLAM_BUILD to the build directory)\n"
+        )
     rows = measure(quick)
     by = {(r["size"], r["B"], r["method"]): r for r in rows}
     print("ms per full pose-cell step: median wall clock (median process CPU); float32;")

@@ -9,7 +9,9 @@ plus the experience-map paper's features (``torchratslam.graph.features``):
   the current experience to it; ``LINK`` links the current experience to an existing one
   (one link per pair, either direction) and makes it current; ``SET`` only makes it
   current. A link stores ``(d, heading, facing)`` relative to its source's orientation
-  and the elapsed time;
+  and a time: OpenRatSLAM's ``accum_delta_time_s``, which it never resets (the time
+  since the start of the run; ``exp_link_time="since_start"``), or the time since the
+  previous link (``"per_link"``, the project's choice);
 * :meth:`ExperienceMap.iterate` runs ``exp_loops`` passes of the configured backend
   (``exp_backend``) on :meth:`ExperienceMap.posegraph` and writes the poses back.
 
@@ -20,8 +22,7 @@ graph's node poses are refreshed lazily when :attr:`ExperienceMap.graph` is read
 
 Example:
     >>> from torchratslam.graph.experience_map import ExperienceMap
-    >>> from torchratslam.graph.geometry import inverse, signed_delta, wrap_angle
-from torchratslam.graph.messages import Action, ActionKind
+    >>> from torchratslam.graph.messages import Action, ActionKind
     >>> from torchratslam.graph.params import ExperienceMapParams
     >>> em = ExperienceMap(ExperienceMapParams(exp_initial_em_deg=0.0))
     >>> em.apply(Action(ActionKind.CREATE, dest_id=0))
@@ -50,7 +51,7 @@ from torchratslam.graph.features import (
     rotate_link_components,
     temporal_map,
 )
-from torchratslam.graph.geometry import inverse, signed_delta, wrap_angle
+from torchratslam.graph.geometry import inverse, wrap_angle
 from torchratslam.graph.messages import Action, ActionKind
 from torchratslam.graph.params import ExperienceMapParams
 from torchratslam.graph.posegraph import PoseGraph
@@ -132,8 +133,12 @@ class ExperienceMap:
         self._behaviour = np.zeros(0, dtype=np.int64)
         self._eidx: dict[tuple[int, int], int] = {}
         self._g = nx.DiGraph()
+        self._dirty_edges: set[int] = set()  # links whose graph attributes are stale
+        self._dirty_nodes: set[int] = set()  # experiences whose graph attributes are stale
         self._poses_dirty = False
         self._order: np.ndarray | None = None
+        self._links_version = 0  # bumped by every change of the links
+        self._ref_links: tuple | None = None  # (links version, src, dst, link) in ref order
         self._version = 0  # bumped by every change of poses or links
         self._fixed_at: tuple | None = None  # (version, params, backend) of a fixed point
         self.current_id = -1
@@ -182,6 +187,13 @@ class ExperienceMap:
         behaviour, confidence``. Treat it as read-only: change the map through the
         methods so the arrays stay in sync.
         """
+        if self._dirty_nodes:
+            nodes = self._g.nodes
+            for i in sorted(self._dirty_nodes):
+                nodes[i].update(self._node_attrs(i))
+            self._dirty_nodes.clear()
+        if self._dirty_edges:
+            self._flush_edges()
         if self._poses_dirty:
             p = self._pose[: self._n].tolist()
             nx.set_node_attributes(
@@ -223,9 +235,11 @@ class ExperienceMap:
         Returns:
             The new experience id (= its row).
         """
-        pose = np.array([x, y, wrap_angle(th, include_pi=True)], dtype=np.float64)
+        pose = (float(x), float(y), wrap_angle(float(th), include_pi=True))
         pcv = np.asarray(pc, dtype=np.float64).reshape(-1)
-        if pcv.shape != (3,) or not (np.all(np.isfinite(pose)) and np.all(np.isfinite(pcv))):
+        if pcv.shape != (3,) or not (
+            all(map(math.isfinite, pose)) and all(map(math.isfinite, pcv.tolist()))
+        ):
             raise InputError(
                 f"experience needs finite x, y, th and 3 pose-cell coordinates, got {pose}, {pcv}"
             )
@@ -243,7 +257,8 @@ class ExperienceMap:
         self._t[i] = float(t)
         self._n = need
         self._version += 1
-        self._g.add_node(i, **self._node_attrs(i))
+        self._g.add_node(i)  # its attributes are written when the graph is read
+        self._dirty_nodes.add(i)
         return i
 
     def _node_attrs(self, i: int) -> dict[str, Any]:
@@ -277,9 +292,16 @@ class ExperienceMap:
         self._link[k] = (d, heading, facing, dt)
         self._meas[k] = _measurement_of(d, heading, facing)
         self._version += 1
+        self._links_version += 1
 
     def _sync_edge(self, k: int) -> None:
-        self._g.edges[int(self._src[k]), int(self._dst[k])].update(self._edge_attrs(k))
+        """Mark link ``k``'s attributes for the graph (written when :attr:`graph` is read)."""
+        self._dirty_edges.add(k)
+
+    def _flush_edges(self) -> None:
+        for k in sorted(self._dirty_edges):
+            self._g.edges[int(self._src[k]), int(self._dst[k])].update(self._edge_attrs(k))
+        self._dirty_edges.clear()
 
     def link_index(self, a: int, b: int) -> int:
         """Row of the link between ``a`` and ``b`` in either direction, or -1."""
@@ -333,15 +355,16 @@ class ExperienceMap:
         self._set_link_values(
             k,
             float(d),
-            float(wrap_angle(heading, include_pi=True)),
-            float(wrap_angle(facing, include_pi=True)),
+            wrap_angle(float(heading), include_pi=True),
+            wrap_angle(float(facing), include_pi=True),
             float(dt),
         )
         self._counts[k] = counts
         self._behaviour[k] = int(behaviour)
         self._e = need
         self._eidx[(src, dst)] = k
-        self._g.add_edge(src, dst, **self._edge_attrs(k))
+        self._g.add_edge(src, dst)  # its attributes are written when the graph is read
+        self._dirty_edges.add(k)
         self._order = None
         return True
 
@@ -350,6 +373,7 @@ class ExperienceMap:
         k = self._eidx.get((int(src), int(dst)))
         if k is None:
             raise GraphError(f"there is no link {src} -> {dst} to remove")
+        self._flush_edges()  # rows shift below
         e = self._e
         for name in self._LINK_FIELDS:
             a = getattr(self, f"_{name}")
@@ -357,6 +381,7 @@ class ExperienceMap:
         self._e = e - 1
         self._g.remove_edge(int(src), int(dst))
         self._version += 1
+        self._links_version += 1
         s, d = self._src[: self._e].tolist(), self._dst[: self._e].tolist()
         self._eidx = {(a, b): i for i, (a, b) in enumerate(zip(s, d))}
         self._order = None
@@ -380,9 +405,10 @@ class ExperienceMap:
         """The accumulated transition as a link of ``src``: ``(d, heading, facing)``."""
         th = float(self._pose[src, 2])
         d = math.hypot(self.accum_x, self.accum_y)
-        heading = signed_delta(th, math.atan2(self.accum_y, self.accum_x), include_pi=True)
-        facing = signed_delta(
-            th, wrap_angle(self.accum_facing + relative_rad, include_pi=True), include_pi=True
+        # wrap_angle's float path (no numpy): bit-identical to the reference's clip_rad_180
+        heading = wrap_angle(math.atan2(self.accum_y, self.accum_x) - th, include_pi=True)
+        facing = wrap_angle(
+            wrap_angle(self.accum_facing + relative_rad, include_pi=True) - th, include_pi=True
         )
         return d, float(heading), float(facing)
 
@@ -434,16 +460,21 @@ class ExperienceMap:
     ) -> int:
         """``CREATE``: new experience at current pose + accumulated delta, linked, current.
 
-        The first experience sits at ``(0, 0, wrap(accum_facing))``. Later ones at
+        The first experience sits at the accumulated ``(accum_x, accum_y,
+        wrap(accum_facing))`` and the accumulators run on (OpenRatSLAM, whose
+        ``on_set_experience(0, 0)`` returns early), or with ``exp_first_at_origin`` at
+        ``(0, 0, wrap(accum_facing))`` with the accumulators restarted there. Later ones at
         ``(x_cur + accum_x, y_cur + accum_y, wrap(accum_facing))`` with a link from the
-        current experience (measured from the accumulators, elapsed time reset).
+        current experience (measured from the accumulators; its time as
+        ``exp_link_time`` says).
 
         Returns:
             The new experience id.
         """
         cur = self.current_id
+        first_at_origin = self.params.exp_first_at_origin
         if cur < 0:
-            x, y = 0.0, 0.0
+            x, y = (0.0, 0.0) if first_at_origin else (self.accum_x, self.accum_y)
         else:
             x = float(self._pose[cur, 0]) + self.accum_x
             y = float(self._pose[cur, 1]) + self.accum_y
@@ -459,6 +490,11 @@ class ExperienceMap:
         if cur >= 0:
             self._transition(cur, new, behaviour)
             self._link_from_accumulators(cur, new, 0.0, behaviour)
+        elif not first_at_origin:
+            # OpenRatSLAM: its current id starts at 0, so on_set_experience(0, 0) returns
+            # at once and the accumulators run on from where they are
+            self.current_id = new
+            return new
         self._make_current(new, 0.0)
         return new
 
@@ -467,7 +503,7 @@ class ExperienceMap:
     ) -> bool:
         d, heading, facing = self._measurement(src, relative_rad)
         added = self.add_link(src, dst, d, heading, facing, self.accum_time, behaviour=behaviour)
-        if added:
+        if added and self.params.exp_link_time == "per_link":
             self.accum_time = 0.0
         return added
 
@@ -494,7 +530,8 @@ class ExperienceMap:
 
         Nothing happens when ``dest`` is already current. Otherwise ``accum_x = accum_y
         = 0`` and ``accum_facing = wrap(th_dest + relative_rad)``; the elapsed time is
-        kept (OpenRatSLAM resets it only when a link is made). The move counts as a
+        kept (OpenRatSLAM never resets it; ``exp_link_time="per_link"`` restarts it when
+        a link is made). The move counts as a
         transition for Eq. 9 and, with ``exp_link_averaging``, is averaged into the link
         between the two experiences if there is one (Eq. 6).
         """
@@ -532,7 +569,8 @@ class ExperienceMap:
         self._set_link_values(
             k, math.hypot(new[0], new[1]), math.atan2(new[1], new[0]), float(new[2]), dt
         )
-        self.accum_time = 0.0
+        if self.params.exp_link_time == "per_link":
+            self.accum_time = 0.0
         self._sync_edge(k)
 
     def _transition(self, src: int, dst: int, behaviour: int) -> None:
@@ -543,20 +581,23 @@ class ExperienceMap:
         direction) counts a traversal.
         """
         k_pair = self.link_index(src, dst)
-        out = [self._eidx[(src, v)] for v in self._g.successors(src)]
-        rows = np.array(out, dtype=np.int64)
-        rows = rows[self._behaviour[rows] == behaviour] if len(rows) else rows
-        self._counts[rows, 2] += 1
-        self._counts[rows[self._dst[rows] == dst], 1] += 1
+        # the links leaving src (a node's few out-links, not the map's links)
+        eidx, beh, dsts, counts = self._eidx, self._behaviour, self._dst, self._counts
+        out = [eidx[(src, v)] for v in self._g.successors(src)]
+        rows = [k for k in out if beh[k] == behaviour]
+        for k in rows:
+            counts[k, 2] += 1
+            if dsts[k] == dst:
+                counts[k, 1] += 1
         if k_pair >= 0:
-            self._counts[k_pair, 0] += 1
-        touched = set(rows.tolist()) | ({k_pair} if k_pair >= 0 else set())
-        for k in touched:
-            self._sync_edge(k)
+            counts[k_pair, 0] += 1
+            self._dirty_edges.add(k_pair)
+        self._dirty_edges.update(rows)
         thr = self.params.exp_link_confidence_threshold
-        if thr > 0.0 and len(rows):
-            conf = link_confidence(self._counts[rows, 1], self._counts[rows, 2])
-            doomed = [(src, int(v)) for v in self._dst[rows[conf < thr]]]
+        if thr > 0.0 and rows:
+            sel = np.array(rows, dtype=np.int64)
+            conf = link_confidence(self._counts[sel, 1], self._counts[sel, 2])
+            doomed = [(src, int(v)) for v in self._dst[sel[conf < thr]]]
             for a, b in doomed:
                 self.remove_link(a, b)
 
@@ -597,20 +638,46 @@ class ExperienceMap:
         if self._backend is None:
             from torchratslam.graph.backends import make_backend
 
-            self._backend = make_backend(self.params.exp_backend)
+            name = self.params.exp_backend
+            if name == "alpha":
+                self._backend = make_backend(name, schedule=self.params.exp_relax_order)
+            else:
+                self._backend = make_backend(name)
         return self._backend
+
+    def _reference_links(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Link ends and ``(d, heading, facing)`` in OpenRatSLAM's order (cached)."""
+        cached = self._ref_links
+        if cached is None or cached[0] != self._links_version or len(cached[1]) != self._e:
+            idx = self._reference_order()
+            e = self._e
+            cached = (
+                self._links_version,
+                np.ascontiguousarray(self._src[:e][idx]),
+                np.ascontiguousarray(self._dst[:e][idx]),
+                np.ascontiguousarray(self._link[:e, :3][idx]),
+            )
+            self._ref_links = cached
+        return cached[1], cached[2], cached[3]
 
     def iterate(self) -> None:
         """Relax the map: ``exp_loops`` passes of the backend, poses written back.
 
         A map with fewer than two experiences or no link is left as it is, and so is
-        every map when ``exp_loops`` is 0 and the backend is the alpha rule. With the
-        alpha backend a relaxation whose first pass moves nothing by more than
-        :attr:`relax_tol` (relative) stops there (the map is at the sweep's fixed point
-        to rounding), and later calls are skipped until poses or links change. This is
-        a deliberate deviation from always running ``exp_loops`` passes: the map differs
-        from the always-run one by rounding noise only (tested to 1e-9); set
-        ``relax_tol = 0`` to disable it.
+        every map when ``exp_loops`` is 0 and the backend is the alpha rule.
+
+        With ``exp_backend="alpha"`` and ``exp_relax_order="openratslam"`` (the
+        defaults) this is OpenRatSLAM's ``iterate()``, compiled, in place: the links in
+        its order, its arithmetic; a pass that changes nothing ends the relaxation and
+        later calls are skipped until poses or links change (exact: the result is
+        bit-identical to running every pass). With ``exp_relax_order="colour"`` a
+        relaxation whose first pass moves nothing by more than :attr:`relax_tol`
+        (relative) stops there (the map is at the sweep's fixed point to rounding), and
+        later calls are skipped until poses or links change. This is a deliberate
+        deviation from always running ``exp_loops`` passes: the map differs from the
+        always-run one by rounding noise only (tested to 1e-9); set ``relax_tol = 0`` to
+        disable it. With ``exp_backend="alpha_local"`` the backend's ``relax_inplace``
+        relaxes the map's own arrays only where the map changed since its last call.
         """
         loops = self.params.exp_loops
         alpha = self.params.exp_backend.startswith("alpha")
@@ -619,6 +686,20 @@ class ExperienceMap:
         backend = self.backend
         key = (self._version, id(self.params), id(backend))
         if self._fixed_at == key:
+            return
+        if alpha and getattr(backend, "schedule", None) == "openratslam":
+            # OpenRatSLAM's loop, compiled, in place on the map's own arrays
+            # (the arrays are the map's own: float64, C-contiguous, int64 ends)
+            from torchratslam.graph.backends._sweep import sweep
+
+            src, dst, link = self._reference_links()
+            ran = sweep(self._pose, src, dst, link, loops, float(self.params.exp_correction))
+            self._poses_dirty = True
+            self._version += 1
+            if ran < loops:  # a pass changed nothing: the map is at its fixed point
+                self._fixed_at = (self._version, id(self.params), id(backend))
+            else:
+                self._log_not_converged(loops)
             return
         relax_inplace = getattr(backend, "relax_inplace", None)
         if callable(relax_inplace):
@@ -655,7 +736,11 @@ class ExperienceMap:
         self._version += 1
         if getattr(backend, "last_converged", False):
             self._fixed_at = (self._version, id(self.params), id(backend))
-        elif alpha and log.isEnabledFor(logging.DEBUG):
+        elif alpha:
+            self._log_not_converged(loops)
+
+    def _log_not_converged(self, loops: int) -> None:
+        if log.isEnabledFor(logging.DEBUG):
             log.debug(
                 "relaxation: %d passes of %r did not reach a fixed point (%d experiences)",
                 loops,

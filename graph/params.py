@@ -152,3 +152,30 @@ class ExperienceMapParams(Params):
         ge=0.0,
         le=1.0,
     )
+    # Issue 12: OpenRatSLAM's exact behaviours and the project's alternatives, by name.
+    # Defaults are OpenRatSLAM's; the ``behaviour`` profile of torchratslam.config sets
+    # all of them at once (docs/openratslam-fidelity.md has each one's measured effect).
+    exp_relax: str = param(
+        "on_action",
+        "when the pipeline relaxes the map: on_action (only on frames with an action, as "
+        "OpenRatSLAM's action_callback) | every_frame",
+        choices=("on_action", "every_frame"),
+    )
+    exp_first_at_origin: bool = param(
+        False,
+        "place the first experience at (0, 0) and restart the accumulators there; false: "
+        "at the odometry accumulated so far, accumulators kept (OpenRatSLAM)",
+    )
+    exp_link_time: str = param(
+        "since_start",
+        "a link's time: since_start (OpenRatSLAM never resets accum_delta_time_s) | "
+        "per_link (time since the previous link)",
+        choices=("since_start", "per_link"),
+    )
+    exp_relax_order: str = param(
+        "openratslam",
+        "link order of the alpha backend's sweep: openratslam (by source experience, then "
+        "insertion, in place; compiled) | colour (vectorised colour classes, a different "
+        "Gauss-Seidel order with a slightly different fixed point)",
+        choices=("openratslam", "colour"),
+    )

@@ -4,6 +4,10 @@ Keys are named exactly as in OpenRatSLAM (``shared/reference/parameters.md``); a
 that is absent takes OpenRatSLAM's default. The key space is flat, as in OpenRatSLAM's
 own config files: :func:`load_config` routes each key to the module that owns it.
 
+Behaviour profiles (``behaviour: openratslam``, the default, or ``torchratslam``) set
+the keys of :data:`PROFILES` that a config does not set itself: OpenRatSLAM exactly, or
+the project's own choices (``docs/openratslam-fidelity.md``).
+
 Example:
     >>> from torchratslam.config import load_config
     >>> cfg = load_config("configs/virtual_tour.yaml")
@@ -37,6 +41,7 @@ CONFIG_DIR = _presets_dir()
 
 __all__ = [
     "CONFIG_DIR",
+    "PROFILES",
     "ExperienceMapParams",
     "GeneralParams",
     "LocalViewParams",
@@ -47,6 +52,7 @@ __all__ = [
     "check_config_limits",
     "load_config",
     "param",
+    "profile_values",
 ]
 
 
@@ -63,6 +69,23 @@ class GeneralParams(Params):
     pose_cells: str = param("ratslam", "pose-cell module (a name in registry.POSE_CELLS)")
     experience_map: str = param("ratslam", "experience map (a name in registry.EXPERIENCE_MAPS)")
     odometry: str = param("given", "odometry source: given | visual (registry.ODOMETRY)")
+    behaviour: str = param(
+        "openratslam",
+        "behaviour profile: openratslam (exactly OpenRatSLAM) | torchratslam (the project's "
+        "own choices); sets every key of PROFILES that the config does not set itself",
+        choices=("openratslam", "torchratslam"),
+    )
+    skip_first_odometry: bool = param(
+        True,
+        "no pose-cell step, no action and no experience-map odometry at frame 0, as "
+        "OpenRatSLAM's nodes skip their first odometry message (prev_time == 0)",
+    )
+    action_angle: str = param(
+        "injection",
+        "relative angle an action carries to the experience map: injection (the last "
+        "injection's, OpenRatSLAM's get_relative_rad) | view (this frame's view angle)",
+        choices=("injection", "view"),
+    )
 
 
 @dataclass(frozen=True)
@@ -86,6 +109,52 @@ class PoseCellParams(Params):
         2.0, "pose-cell distance that makes a new experience", ge=0.0
     )
     pc_vt_restore: float = param(0.05, "decay relaxation per step", ge=0.0)
+    # Issue 12: OpenRatSLAM's exact behaviours (defaults) or the project's choices by name.
+    pc_decode: str = param(
+        "openratslam",
+        "packet centre decoding: openratslam (find_best: phasors at (i + 1) 2pi/n, minus one "
+        "cell; a centre on a cell comes out just below it) | exact (phasors at i 2pi/n)",
+        choices=("openratslam", "exact"),
+    )
+    vt_inject_rule: str = param(
+        "openratslam",
+        "which known templates inject energy: openratslam (all while fewer than 10 templates "
+        "exist, then all but the 10 most recent) | last_10 (never the 10 most recent)",
+        choices=("openratslam", "last_10"),
+    )
+    pc_axis: str = param(
+        "openratslam",
+        "path-integration axes: openratslam (layer k moves along (sin, cos)(k 2pi/TH) in "
+        "(x, y), heading 0 is +y) | math (along (cos, sin), heading 0 is +x)",
+        choices=("openratslam", "math"),
+    )
+    pc_wrap: str = param(
+        "openratslam",
+        "activity crossing the x/y wrap: openratslam (two edge cells of a layer lose what "
+        "crosses, as its wrap-back loops start at 1) | preserve_mass (all of it wraps)",
+        choices=("openratslam", "preserve_mass"),
+    )
+    pc_multi_cell: bool = param(
+        False,
+        "path integration over more than one cell per step (integer roll + bilinear "
+        "fraction); false: OpenRatSLAM's four-neighbour weights, exact up to one cell",
+    )
+
+    pc_engine: str = param(
+        "auto",
+        "how one CPU network steps: numpy (on the packet's crop, fastest at B = 1) | torch "
+        "(the batched methods) | auto (numpy for one CPU network). The same actions; float32 "
+        "rounding differs, so torch reproduces runs recorded before issue 12 bit for bit",
+        choices=("auto", "numpy", "torch"),
+    )
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        if self.pc_wrap == "openratslam" and self.pc_multi_cell:
+            raise ConfigError(
+                "pc_wrap='openratslam' (the reference's edge loss) is defined for one-cell "
+                "steps only: set pc_multi_cell=false or pc_wrap='preserve_mass'"
+            )
 
 
 @dataclass(frozen=True)
@@ -131,6 +200,44 @@ class VisualOdometryParams(Params):
     vtrans_scaling: float = param(100.0, "profile difference to metres scale", gt=0.0)
     vtrans_max: float = param(20.0, "cap on the translational speed estimate", ge=0.0)
 
+
+# Behaviour profiles (issue 12): ``behaviour: NAME`` sets each of these keys unless the
+# config sets it itself. "openratslam" is OpenRatSLAM exactly (the defaults of the
+# dataclasses); "torchratslam" is the project's own behaviour before issue 12.
+# docs/openratslam-fidelity.md gives every key's measured effect.
+PROFILES: dict[str, dict[str, Any]] = {
+    "openratslam": {
+        "pc_decode": "openratslam",
+        "vt_inject_rule": "openratslam",
+        "pc_axis": "openratslam",
+        "pc_wrap": "openratslam",
+        "pc_multi_cell": False,
+        "pc_engine": "auto",
+        "skip_first_odometry": True,
+        "action_angle": "injection",
+        "exp_relax": "on_action",
+        "exp_first_at_origin": False,
+        "exp_link_time": "since_start",
+        "exp_relax_order": "openratslam",
+    },
+    "torchratslam": {
+        "pc_decode": "exact",
+        "vt_inject_rule": "last_10",
+        "pc_axis": "math",
+        "pc_wrap": "preserve_mass",
+        "pc_multi_cell": True,
+        # the batched torch step: its float32 rounding is what the project's maps before
+        # issue 12 were made with (the numpy step can tip a near-tie the other way)
+        "pc_engine": "torch",
+        "skip_first_odometry": False,
+        "action_angle": "view",
+        "exp_relax": "every_frame",
+        "exp_first_at_origin": True,
+        "exp_link_time": "per_link",
+        "exp_relax_order": "colour",
+    },
+}
+DEFAULT_BEHAVIOUR = "openratslam"
 
 # Keys that only drive OpenRatSLAM's on-screen drawing; accepted and ignored anywhere.
 DISPLAY_KEYS = frozenset(
@@ -215,6 +322,7 @@ class RatSLAMConfig:
         """
         owner = cls.key_owner()
         grouped: dict[str, dict[str, Any]] = {attr: {} for attr in cls.sections()}
+        values = {**profile_values(values.get("behaviour", DEFAULT_BEHAVIOUR), source), **values}
         for key, value in values.items():
             if key in META_KEYS or key in DISPLAY_KEYS:
                 continue
@@ -237,8 +345,31 @@ class RatSLAMConfig:
         return out
 
     def replace(self, **changes: Any) -> RatSLAMConfig:
-        """A copy with some flat keys changed (validated like a loaded file)."""
-        return self.from_flat({**self.to_flat(), **changes}, source="replace()")
+        """A copy with some flat keys changed (validated like a loaded file).
+
+        Changing ``behaviour`` sets the new profile's keys too, except those given in
+        ``changes`` and those whose current value differs from the old profile's (keys
+        the config set itself; a key set to the old profile's own value follows the new
+        profile).
+        """
+        flat = self.to_flat()
+        if "behaviour" in changes:
+            old = profile_values(flat["behaviour"], "replace()")
+            flat = {k: v for k, v in flat.items() if k not in old or v != old[k]}
+        return self.from_flat({**flat, **changes}, source="replace()")
+
+
+def profile_values(name: Any, source: str = "config") -> dict[str, Any]:
+    """The keys a behaviour profile sets (a copy of ``PROFILES[name]``).
+
+    Raises:
+        ConfigError: an unknown profile name (with the nearest valid one).
+    """
+    if name not in PROFILES:
+        raise ConfigError(
+            f"{source}: " + unknown_name_message("behaviour profile", str(name), PROFILES)
+        )
+    return dict(PROFILES[name])
 
 
 def _read_text(path: Path) -> str:

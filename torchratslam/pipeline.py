@@ -39,9 +39,12 @@ Example:
 
 from __future__ import annotations
 
+import dataclasses
+import gc
 import importlib
 import itertools
 import logging
+import math
 import queue
 import threading
 import time
@@ -54,7 +57,7 @@ import torch
 
 from torchratslam.config import RatSLAMConfig, VisualOdometryParams
 from torchratslam.graph.errors import InputError
-from torchratslam.graph.messages import Action
+from torchratslam.graph.messages import Action, ActionKind
 from torchratslam.messages import Frame, ViewMatch
 from torchratslam.protocols import FrameSource
 from torchratslam.readers.visual_odometry import GivenOdometry, VisualOdometry
@@ -306,13 +309,29 @@ class RatSLAM:
             view = self.local_view.process(frame.image, frame_index=index)
         return odo, view  # type: ignore[return-value]
 
+    def _skips_odometry(self, index: int) -> bool:
+        """OpenRatSLAM's nodes skip their first odometry message (``skip_first_odometry``)."""
+        return index == 0 and bool(getattr(self.config.general, "skip_first_odometry", False))
+
     def _stage_pose_cells(
-        self, view: ViewMatch, odo: tuple[float, float, float]
+        self, view: ViewMatch, odo: tuple[float, float, float], index: int = -1
     ) -> tuple[Action, tuple[float, float, float]]:
+        pcs = self.pose_cells
         with self.timings.section("pose_cells"):
-            self.pose_cells.on_view_template(view)
-            action = self.pose_cells.on_odometry(*odo)
-            pc = _centre(self.pose_cells)
+            pcs.on_view_template(view)
+            if self._skips_odometry(index):
+                action = Action.none()
+            else:
+                action = pcs.on_odometry(*odo)
+                if (
+                    action.kind != ActionKind.NONE
+                    and getattr(self.config.general, "action_angle", "view") == "injection"
+                    and hasattr(pcs, "vt_delta_pc_th")
+                ):
+                    # OpenRatSLAM's get_relative_rad(): the angle of the last injection
+                    rad = pcs.vt_delta_pc_th * 2.0 * math.pi / pcs.dims[2]
+                    action = dataclasses.replace(action, relative_rad=rad)
+            pc = _centre(pcs)
         return action, pc
 
     def _stage_experience_map(
@@ -325,12 +344,15 @@ class RatSLAM:
         pc: tuple[float, float, float],
     ) -> int:
         em = self.experience_map
+        relax = getattr(getattr(em, "params", None), "exp_relax", "every_frame")
         with self.timings.section("experience_map"):
-            em.on_odometry(*odo)
+            if not self._skips_odometry(index):
+                em.on_odometry(*odo)
             em.apply(
                 action, frame=index, t=float(frame.t), pc=pc, template_id=int(view.template_id)
             )
-            em.iterate()
+            if relax == "every_frame" or action.kind != ActionKind.NONE:
+                em.iterate()
         return int(em.current_id)
 
     def _finish(
@@ -358,7 +380,7 @@ class RatSLAM:
         """Process one frame (sequentially) and return what it did."""
         index = self.frame_index
         odo, view = self._stage_view(frame, index)
-        action, pc = self._stage_pose_cells(view, odo)
+        action, pc = self._stage_pose_cells(view, odo, index)
         exp_id = self._stage_experience_map(frame, index, view, odo, action, pc)
         self.frame_index += 1
         return self._finish(frame, index, view, odo, action, pc, exp_id)
@@ -452,6 +474,14 @@ class RatSLAM:
                 if n % 25 == 0 or n == total:
                     bar.set_postfix(templates=r.templates, experiences=r.experiences, refresh=False)
 
+        # Python's cyclic garbage collector: a full collection scans every object alive
+        # (torch, the frames, the map: 10^5-10^6 objects, tens of ms) and fires on
+        # allocation counts, i.e. at random frames. Objects that exist before the run
+        # are parked in the permanent generation for its duration, so collections only
+        # scan what the run itself allocates (only when nobody else froze objects).
+        freeze = gc.isenabled() and gc.get_freeze_count() == 0
+        if freeze:
+            gc.freeze()
         t0 = time.perf_counter()
         try:
             if pipelined:
@@ -460,6 +490,8 @@ class RatSLAM:
                 for frame in it:
                     on_result(self.step_frame(frame))
         finally:
+            if freeze:
+                gc.unfreeze()
             if bar is not None:
                 bar.close()
         wall = time.perf_counter() - t0
@@ -525,8 +557,8 @@ class RatSLAM:
             return (frame, start + i, *self._stage_view(frame, start + i))
 
         def pc_work(item: tuple) -> tuple:
-            _, _, odo, view = item
-            return (*item, *self._stage_pose_cells(view, odo))
+            _, index, odo, view = item
+            return (*item, *self._stage_pose_cells(view, odo, index))
 
         def em_work(item: tuple) -> tuple:
             frame, index, odo, view, action, pc = item
@@ -655,6 +687,8 @@ class RatSLAM:
         ids = np.asarray(old_to_new, dtype=np.int64).reshape(-1)
         old = np.asarray(self._exp, dtype=np.int64)
         ok = (old >= 0) & (old < ids.size)
+        if not ok.any():  # nothing to re-point (e.g. no experience yet: frame 0 only)
+            return
         new = np.where(ok, ids[np.where(ok, old, 0)], old)
         self._exp[:] = [int(v) for v in new]
 

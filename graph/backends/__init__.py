@@ -93,7 +93,8 @@ def make_backend(name: str, **options: Any) -> Backend:
     Args:
         name: "alpha", "alpha_reference", "alpha_local", "gtsam" or "isam2".
         **options: constructor options of that backend (e.g. ``sigmas=(0.1, 0.1, 0.05)``
-            for gtsam/isam2, ``schedule="reference"`` for alpha).
+            for gtsam/isam2, ``schedule="openratslam"`` (the compiled reference-order
+            sweep) or ``"reference"`` for alpha).
 
     Raises:
         ConfigError: unknown name or option.

@@ -152,3 +152,69 @@ def test_modules_are_chosen_by_name_in_the_config():
     cfg = load_config(local_view="features", odometry="visual", experience_map="mine")
     assert cfg.general.local_view == "features" and cfg.general.odometry == "visual"
     assert cfg.general.experience_map == "mine" and cfg.general.pose_cells == "ratslam"
+
+
+# ----------------------------------------------------------- behaviour profiles (issue 12)
+def _switches(cfg: RatSLAMConfig) -> dict:
+    from torchratslam.config import PROFILES
+
+    flat = cfg.to_flat()
+    return {k: flat[k] for k in PROFILES["openratslam"]}
+
+
+def test_the_default_behaviour_is_openratslam_and_a_profile_sets_every_switch():
+    from torchratslam.config import PROFILES
+
+    assert set(PROFILES) == {"openratslam", "torchratslam"}
+    assert set(PROFILES["openratslam"]) == set(PROFILES["torchratslam"])
+    owner = RatSLAMConfig.key_owner()
+    assert set(PROFILES["openratslam"]) <= set(owner)  # every switch is a real key
+    default = load_config()
+    assert default.general.behaviour == "openratslam"
+    assert _switches(default) == PROFILES["openratslam"]
+    assert _switches(RatSLAMConfig()) == PROFILES["openratslam"]  # the dataclass defaults
+    own = load_config(behaviour="torchratslam")
+    assert _switches(own) == PROFILES["torchratslam"]
+    for key, value in PROFILES["torchratslam"].items():  # each key lands in its module
+        assert getattr(getattr(own, owner[key]), key) == value
+    assert own.experience_map.exp_relax == "every_frame"
+
+
+def test_explicit_keys_override_the_profile(tmp_path: Path):
+    p = tmp_path / "c.yaml"
+    p.write_text("behaviour: torchratslam\nexp_relax: on_action\npc_dim_xy: 15\n")
+    cfg = load_config(p)
+    assert cfg.experience_map.exp_relax == "on_action"  # the file's own key wins
+    assert cfg.experience_map.exp_relax_order == "colour"  # the rest from the profile
+    assert cfg.pose_cells.pc_dim_xy == 15
+    assert load_config(p, exp_relax_order="openratslam").experience_map.exp_relax_order == (
+        "openratslam"
+    )
+    # replace() switches the profile but keeps keys the config set itself
+    back = cfg.replace(behaviour="openratslam")
+    assert back.general.behaviour == "openratslam" and back.general.skip_first_odometry
+    assert back.experience_map.exp_relax_order == "openratslam"
+    assert load_config().replace(behaviour="torchratslam") == load_config(behaviour="torchratslam")
+    # the saved flat form reloads to the same config
+    assert RatSLAMConfig.from_flat(cfg.to_flat()) == cfg
+
+
+def test_unknown_profile_is_rejected_with_a_suggestion(tmp_path: Path):
+    with pytest.raises(ConfigError, match=r"unknown behaviour profile 'openratslm'.*'openratslam'"):
+        load_config(behaviour="openratslm")
+    p = tmp_path / "c.yaml"
+    p.write_text("behaviour: TorchRatSLAM\n")
+    with pytest.raises(ConfigError, match=r"c\.yaml.*did you mean 'torchratslam'"):
+        load_config(p)
+    with pytest.raises(ConfigError, match="exp_relax"):
+        load_config(exp_relax="sometimes")
+
+
+def test_an_openratslam_txt_config_gets_the_openratslam_behaviour(tmp_path: Path):
+    from torchratslam.config import PROFILES
+
+    p = tmp_path / "config.txt"
+    p.write_text("[general]\ntopic_root=irat\n[ratslam]\nexp_loops=20\npc_dim_xy=21\n")
+    cfg = load_config(p)
+    assert cfg.general.behaviour == "openratslam"
+    assert _switches(cfg) == PROFILES["openratslam"] and cfg.experience_map.exp_loops == 20

@@ -93,7 +93,7 @@ def _frames(n, seed=0):
         )
 
 
-def _fake_slam(log, **kw):
+def _fake_slam(log, behaviour="openratslam", **kw):
     from torchratslam.graph.experience_map import ExperienceMap
 
     class LoggingMap(ExperienceMap):
@@ -109,7 +109,7 @@ def _fake_slam(log, **kw):
             log.append(("em_iterate",))
             super().iterate()
 
-    cfg = RatSLAMConfig()
+    cfg = RatSLAMConfig().replace(behaviour=behaviour)
     return RatSLAM(
         cfg,
         local_view=FakeView(cfg.local_view, log=log),
@@ -122,6 +122,25 @@ def _fake_slam(log, **kw):
 def test_per_frame_order_is_the_references():
     log = Log()
     slam = _fake_slam(log)
+    kinds = [int(slam.step_frame(f).action.kind) for f in _frames(4)]
+    per_frame = [e[0] for e in log]
+    # OpenRatSLAM: the first odometry message is skipped (no pose-cell step, no action,
+    # no experience-map odometry at frame 0); the map relaxes only after an action
+    want = ["lv", "pc_vt", "em_apply"]
+    for kind in kinds[1:]:
+        want += ["lv", "pc_vt", "pc_odo", "em_odo", "em_apply"]
+        want += ["em_iterate"] if kind != ActionKind.NONE else []
+    assert kinds[0] == ActionKind.NONE and per_frame == want
+    log.clear()
+    again = Frame(4, 2.0, np.full((6, 8), 35, np.uint8), vtrans=0.3, vrot=0.1, dt=0.5)
+    assert slam.step_frame(again).action.kind == ActionKind.NONE  # frame 3's view again
+    # no action: no relaxation
+    assert [e[0] for e in log] == ["lv", "pc_vt", "pc_odo", "em_odo", "em_apply"]
+
+
+def test_per_frame_order_of_the_torchratslam_behaviour():
+    log = Log()
+    slam = _fake_slam(log, behaviour="torchratslam")
     for f in _frames(3):
         slam.step_frame(f)
     per_frame = [e[0] for e in log]
@@ -184,7 +203,7 @@ def test_user_registered_modules_are_used_when_selected():
             return 2 * frame.vtrans, frame.vrot, frame.dt
 
     slam = RatSLAM(
-        RatSLAMConfig(),
+        RatSLAMConfig().replace(behaviour="torchratslam"),  # frame 0 makes an experience
         local_view="test_fake_view",
         pose_cells="test_fake_pc",
         odometry="test_double",
@@ -292,7 +311,10 @@ def test_end_to_end_the_loop_closes(sequential_run, loop_frames):
     # the pipeline's own ATE and dead reckoning agree with eval on its outputs
     gt = np.array([f.pose for f in loop_frames])
     traj = slam.trajectory()
-    assert ate == pytest.approx(ate_rmse(traj[:, 3:5], gt[:, :2]))
+    # OpenRatSLAM makes its first experience at frame 1 (frame 0's odometry is skipped)
+    assert traj[0, 2] == -1 and np.isnan(traj[0, 3:]).all() and (traj[1:, 2] >= 0).all()
+    traj, gt_xy = traj[1:], gt[1:, :2]
+    assert ate == pytest.approx(ate_rmse(traj[:, 3:5], gt_xy))
     odo = np.array([(f.vtrans, f.vrot, f.dt) for f in loop_frames])
     assert dr == pytest.approx(ate_rmse(dead_reckoning(*odo.T)[:, :2], gt[:, :2]))
     # the trajectory holds each frame's current experience with its final pose
@@ -320,7 +342,7 @@ def test_end_to_end_pipelined_equals_sequential(sequential_run, loop_frames):
     assert np.array_equal(
         np.asarray(seq.experience_map.poses), np.asarray(slam.experience_map.poses)
     )
-    assert np.array_equal(seq.trajectory(), slam.trajectory())
+    assert np.array_equal(seq.trajectory(), slam.trajectory(), equal_nan=True)
     assert torch.equal(seq.templates, slam.templates)
     assert torch.equal(seq.activity, slam.activity)
 
@@ -333,7 +355,8 @@ def test_remap_experiences_repoints_the_history():
     mapping = np.arange(n)[::-1].copy()
     slam.remap_experiences(mapping)
     after = slam.trajectory()[:, 2].astype(int)
-    assert [mapping[i] for i in before] == after.tolist()
+    assert before[0] == -1  # no experience before the first action (frame 1)
+    assert [mapping[i] if i >= 0 else -1 for i in before] == after.tolist()
 
 
 def test_step_with_visual_odometry_estimates_the_turn():

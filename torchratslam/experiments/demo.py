@@ -21,12 +21,16 @@ import torch
 from torchratslam.experiments.pose_cell_demo import run_pose_cell_demo
 
 
-def run_multisession_demo(out_dir: Path, *, progress: bool = True) -> Path:
+def run_multisession_demo(
+    out_dir: Path, *, progress: bool = True, overrides: dict[str, str] | None = None
+) -> Path:
     """Run the virtual-tour multisession experiment with the alpha and GTSAM backends.
 
     Args:
         out_dir: the demo's output folder; results go to ``out_dir/multisession``.
         progress: progress bars.
+        overrides: flat config keys replaced in the tour's config (e.g.
+            ``{"behaviour": "torchratslam"}``).
 
     Returns:
         The path of the written ``report.md``.
@@ -35,7 +39,13 @@ def run_multisession_demo(out_dir: Path, *, progress: bool = True) -> Path:
 
     out = Path(out_dir) / "multisession"
     result = run_experiment(
-        None, "sim:virtual_tour", out, ablation=True, backends=("alpha", "gtsam"), progress=progress
+        None,
+        "sim:virtual_tour",
+        out,
+        ablation=True,
+        backends=("alpha", "gtsam"),
+        progress=progress,
+        overrides=overrides or {},
     )
     print(report_markdown(result["report"]))
     return out / "report.md"
@@ -51,13 +61,24 @@ def main(argv: Sequence[str] | None = None) -> int:
     )
     parser.add_argument("--skip-multisession", action="store_true", help="only the pose-cell demo")
     parser.add_argument("--quiet", action="store_true", help="no progress bars")
+    parser.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="override a config key of the multisession run (repeatable)",
+    )
     args = parser.parse_args(argv)
+    bad = [s for s in args.set if "=" not in s]
+    if bad:
+        parser.error(f"--set needs KEY=VALUE, got {bad[0]!r}")
+    overrides = dict(s.split("=", 1) for s in args.set)
     torch.set_num_threads(1)
     path = run_pose_cell_demo(args.out)
     print(f"wrote {path}")
     if not args.skip_multisession:
         t0 = time.perf_counter()
-        report = run_multisession_demo(args.out, progress=not args.quiet)
+        report = run_multisession_demo(args.out, progress=not args.quiet, overrides=overrides)
         print(f"wrote {report.parent} ({time.perf_counter() - t0:.0f} s)")
     return 0
 

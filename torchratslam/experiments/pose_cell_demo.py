@@ -55,7 +55,10 @@ def drive_packet(
         centres.append(net.step(vtrans, vrot, dt)[0].numpy())
         # the network moves along the heading, then turns: integrate the same way
         d = vtrans * dt / params.pc_cell_x_size
-        x, y = (x + d * math.cos(heading)) % n_x, (y + d * math.sin(heading)) % n_x
+        dx, dy = math.cos(heading), math.sin(heading)
+        if params.pc_axis == "openratslam":  # layer k moves along (sin, cos)
+            dx, dy = dy, dx
+        x, y = (x + d * dx) % n_x, (y + d * dy) % n_x
         heading += vrot * dt
         reference.append((x, y))
     return np.asarray(centres), np.asarray(reference), net

@@ -29,16 +29,27 @@ compares them):
 * ``"auto"`` (the default) picks ``"crop"`` when a typical packet's box is a small part
   of the network (large networks, batches), else ``"separable"``.
 
-Deviations from OpenRatSLAM (deliberate):
+Behaviours (``PoseCellParams`` keys; the defaults are OpenRatSLAM's, exactly; the
+project's own choices are named values, see ``docs/pose-cells.md`` for what each changes):
 
-* Path integration supports shifts of more than one cell per step (integer part as a
-  roll, fractional part bilinear); up to one cell it equals OpenRatSLAM's four-neighbour
-  weighting.
-* Templates among the last 10 learnt never inject energy, also while fewer than 10
-  exist (OpenRatSLAM's unsigned ``size - 10`` wraps then and injects anyway); this
-  follows the algorithm notes ("except one of the last 10").
-* The packet centre is decoded with angles ``2 pi i / dim`` (OpenRatSLAM uses
-  ``i + 1`` and subtracts one cell afterwards: the same value).
+* ``pc_decode``: ``"openratslam"`` decodes the centre as ``find_best`` does (phasors at
+  ``(i + 1) 2 pi / n``, minus one cell: a centre on a cell comes out just below it, and
+  the injection's truncation then picks the cell below); ``"exact"`` uses ``2 pi i / n``.
+* ``vt_inject_rule``: ``"openratslam"`` injects for every known template while fewer than
+  10 exist (the unsigned ``size - 10`` wraps), then never for the 10 most recent;
+  ``"last_10"`` never for the 10 most recent (the algorithm notes' rule).
+* ``pc_axis``: ``"openratslam"`` moves theta layer ``k`` along ``(sin, cos)(k 2 pi / TH)``
+  in ``(x, y)``; ``"math"`` along ``(cos, sin)``.
+* ``pc_wrap``: ``"openratslam"`` drops the activity that crosses the x/y wrap from two
+  edge cells of a layer (OpenRatSLAM's wrap-back loops start at 1); ``"preserve_mass"``
+  wraps all of it.
+* ``pc_multi_cell``: ``False`` moves by OpenRatSLAM's four-neighbour weights (exact up to
+  one cell per step, extrapolating beyond); ``True`` moves by an integer roll plus a
+  bilinear fraction, any distance.
+
+Two ways to run one step, giving the same actions (and, in float64, centres within
+rounding): one network (``B == 1``) on the CPU runs in numpy on the packet's crop
+(``method="auto"`` or ``"numpy"``), a batch or a GPU runs the torch methods above.
 
 Kept from OpenRatSLAM: the Gaussian weights use the configured "variance" as the
 standard deviation (``exp(-d^2 / (2 var^2))``), and an action is only decided when a
@@ -69,10 +80,10 @@ __all__ = [
     "pc_distance",
 ]
 
-METHODS = ("auto", "crop", "separable", "conv3d")
+METHODS = ("auto", "numpy", "crop", "separable", "conv3d")
 """Ways to compute the excitation/inhibition (see the module docstring); ``"auto"``
-picks ``"crop"`` when a typical packet's box is at most ``crop_fraction`` of the
-network, else ``"separable"``."""
+runs one CPU network in numpy (``"numpy"``) and otherwise picks ``"crop"`` when a
+typical packet's box is at most ``crop_fraction`` of the network, else ``"separable"``."""
 
 TYPICAL_PACKET = (9, 7, 7)
 """Non-zero extent (theta, y, x cells) of a settled packet with the default kernels,
@@ -155,6 +166,65 @@ def _as_batch(value: Any, batch: int, name: str, dtype: Any = np.float64) -> np.
     return arr
 
 
+def _quadrant_table() -> np.ndarray:
+    """How OpenRatSLAM's path integration maps onto the global ``(y, x)`` axes.
+
+    ``path_integration`` rotates layer ``k`` by ``q = floor(dir 2 / pi)`` quarter turns
+    (``rot90_square``: ``new[r][c] = old[n - 1 - c][r]``, numpy's ``rot90(., -1)``), moves
+    it by ``a = v sin(dir90)`` cells along its columns (``+i``) and ``b = v cos(dir90)``
+    along its rows (``+j``) and turns it back. Row ``q`` of the table, found by applying
+    those rotations to index grids, holds (all in the global frame, ``(dy, dx)`` or a
+    cell as ``(y_is_last, x_is_last)``): the direction of ``+i``, of ``+j``, the cell
+    whose ``+i`` move crosses the wrap and is dropped (rotated ``(0, n - 1)``), the cell
+    whose ``+j`` move is dropped (rotated ``(n - 1, 0)``), and the corner both would
+    have reached (rotated ``(0, 0)``).
+
+    Returns:
+        ``(4, 5, 2)`` int64.
+    """
+    n = 5
+    gy, gx = np.mgrid[0:n, 0:n]
+    out = np.zeros((4, 5, 2), dtype=np.int64)
+    c = n // 2
+    for q in range(4):  # four quarter turns, not cells
+        ry, rx = np.rot90(gy, -q), np.rot90(gx, -q)
+        out[q, 0] = (ry[c, c + 1] - ry[c, c], rx[c, c + 1] - rx[c, c])
+        out[q, 1] = (ry[c + 1, c] - ry[c, c], rx[c + 1, c] - rx[c, c])
+        for row, (r, cc) in zip((2, 3, 4), ((0, n - 1), (n - 1, 0), (0, 0)), strict=True):
+            out[q, row] = (ry[r, cc] == n - 1, rx[r, cc] == n - 1)
+    return out
+
+
+_QUADRANTS = _quadrant_table()
+
+
+def _arc(mask: Any) -> tuple[int, int]:
+    """``(start, length)`` of the shortest circular arc holding every True of ``mask``."""
+    s, ln = _minimal_arcs(mask[None])
+    return int(s[0]), int(ln[0])
+
+
+def _arc_with(arc: tuple[int, int], p: int, n: int) -> tuple[int, int]:
+    """A short circular arc (on a ring of ``n``) holding ``arc`` and the cell ``p``."""
+    s, ln = arc
+    if ln == 0:
+        return p, 1
+    if (p - s) % n < ln:
+        return arc
+    fwd = (p - s) % n + 1  # extend the end up to p
+    back = (s + ln - 1 - p) % n + 1  # extend the start down to p
+    return (s, fwd) if fwd <= back else (p, back)
+
+
+def _roll0(a: np.ndarray, s: int) -> np.ndarray:
+    """``np.roll(a, s, axis=0)`` by two slices (less overhead)."""
+    n = a.shape[0]
+    s %= n
+    if s == 0:
+        return a
+    return np.concatenate((a[n - s :], a[: n - s]), axis=0)
+
+
 class PoseCellNetwork(nn.Module):
     """``B`` independent RatSLAM pose-cell networks (no learnable parameters).
 
@@ -163,15 +233,22 @@ class PoseCellNetwork(nn.Module):
         batch_size: number of independent networks ``B``.
         dtype: float32 (default) or float64.
         device: torch device.
-        method: ``"auto"`` (default), ``"crop"``, ``"separable"`` or ``"conv3d"``
-            (module docstring).
+        method: ``"auto"`` (default), ``"numpy"``, ``"crop"``, ``"separable"`` or
+            ``"conv3d"`` (module docstring). ``"numpy"``, and ``"auto"`` unless
+            ``params.pc_engine == "torch"``, run a single CPU network in numpy; otherwise
+            (a batch, a GPU) the torch method ``"auto"`` picks.
         crop_fraction: ``"crop"`` falls back to the whole network (separable) in a step
             whose box holds more than this fraction of the cells; default 0.5 for
             ``B == 1`` (where per-operation overhead dominates) and 0.8 for batches.
 
     Attributes:
         activity: buffer ``(B, TH, Y, X)``, non-negative, each network summing to 1.
+        best: buffer ``(B, 3)`` float64, the packet centre ``(x, y, th)`` decoded at the
+            last step (kept float64 by ``.float()``/``.half()``; in ``state_dict()``).
         dims: ``(X, Y, TH)``.
+
+    ``.to(device, dtype)``, ``.double()`` and ``.float()`` move the activity; cached
+    matrices and scratch buffers are dropped and rebuilt for the new dtype and device.
 
     Example:
         >>> net = PoseCellNetwork(PoseCellParams(pc_dim_xy=11))
@@ -181,6 +258,7 @@ class PoseCellNetwork(nn.Module):
     """
 
     activity: torch.Tensor
+    best: torch.Tensor
 
     def __init__(
         self,
@@ -199,11 +277,18 @@ class PoseCellNetwork(nn.Module):
             raise ConfigError(f"batch_size must be >= 1, got {batch_size}")
         if method not in METHODS:
             raise ConfigError(f"unknown pose-cell method {method!r} (valid: {', '.join(METHODS)})")
+        if method == "numpy" and int(batch_size) != 1:
+            raise ConfigError(f"method 'numpy' runs one network, got batch_size={batch_size}")
         if dtype not in (torch.float32, torch.float64):
             raise ConfigError(f"dtype must be torch.float32 or torch.float64, got {dtype}")
         self.params = params
         self.batch_size = int(batch_size)
         self.requested_method = method
+        self._numpy = int(batch_size) == 1 and (
+            method == "numpy" or (method == "auto" and params.pc_engine != "torch")
+        )
+        if method == "numpy":
+            method = "auto"  # the torch method used off the CPU
         if crop_fraction is None:  # one network is overhead-bound, a batch compute-bound
             crop_fraction = 0.5 if int(batch_size) == 1 else 0.8
         self.crop_fraction = float(crop_fraction)
@@ -230,11 +315,74 @@ class PoseCellNetwork(nn.Module):
         self._gather_cache: dict[tuple, torch.Tensor] = {}
         self._occ: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
         self._occ_key: tuple[int, int] | None = None
-        self.last_crop: tuple[int, int, int] = (th, xy, xy)
-        self._best = torch.zeros(self.batch_size, 3, dtype=torch.float64)
+        self.register_buffer(
+            "best", torch.zeros(self.batch_size, 3, dtype=torch.float64, device=device)
+        )
         self._ring_key: tuple | None = None
         self._ring_cache: list[tuple[np.ndarray, np.ndarray, int]] = []
+        # behaviours (module docstring)
+        self._swap_axes = params.pc_axis == "math"
+        self._one_cell = not params.pc_multi_cell
+        self._edge_loss = params.pc_wrap == "openratslam"
+        self._cpp_decode = params.pc_decode == "openratslam"
+        # numpy path: matrices, gather indices, and the non-zero arcs (start, length) per
+        # axis (th, y, x) valid while the buffer's (pointer, version) is _arcs_key
+        self._np_mats: dict[tuple[str, int, bool], np.ndarray] = {}
+        self._np_index: dict[tuple, Any] = {}  # index arrays and per-crop (coef, index) tuples
+        # (a plain dict: nn.Module's __setattr__ costs microseconds per assignment)
+        self._np_state: dict[str, Any] = {"arcs": None, "key": None, "crop": (th, xy, xy)}
+        self._lookups: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+        self._geo: dict[tuple, dict[str, np.ndarray]] = {}
         self.reset()
+
+    @property
+    def last_crop(self) -> tuple[int, int, int]:
+        """The box (theta, y, x cells) the last step computed on."""
+        return self._np_state["crop"]
+
+    @last_crop.setter
+    def last_crop(self, value: tuple[int, ...]) -> None:
+        self._np_state["crop"] = tuple(value)
+
+    @property
+    def _arcs(self) -> list[tuple[int, int]] | None:
+        return self._np_state["arcs"]
+
+    @_arcs.setter
+    def _arcs(self, value: list[tuple[int, int]] | None) -> None:
+        self._np_state["arcs"] = value
+
+    @property
+    def _best(self) -> torch.Tensor:
+        return self.best
+
+    @_best.setter
+    def _best(self, value: torch.Tensor) -> None:
+        self.best = value.to(dtype=torch.float64, device=self.best.device).reshape(
+            self.batch_size, 3
+        )
+
+    def _clear_caches(self) -> None:
+        """Drop everything derived from the activity's dtype, device or contents."""
+        self._mats = {}
+        self._work = None
+        self._work_views = {}
+        self._gather_cache = {}
+        self._occ = None
+        self._np_mats = {}
+        self._arcs = None
+
+    def _apply(self, fn: Any, recurse: bool = True) -> PoseCellNetwork:
+        best = self.best
+        super()._apply(fn, recurse)
+        if self.activity.dtype not in (torch.float32, torch.float64):
+            raise ConfigError(
+                f"pose-cell activity must be float32 or float64, not {self.activity.dtype}"
+            )
+        # the centre stays float64 (as OpenRatSLAM's doubles) on the activity's device
+        self._buffers["best"] = best.to(device=self.activity.device, dtype=torch.float64)
+        self._clear_caches()
+        return self
 
     # ------------------------------------------------------------------ state
     @property
@@ -253,6 +401,7 @@ class PoseCellNetwork(nn.Module):
             self.activity[:, th, y, x] = 1.0
         self._best = torch.tensor([[x, y, th]], dtype=torch.float64).repeat(self.batch_size, 1)
         self._occ = None
+        self._arcs = None
 
     def centre(self, recompute: bool = False) -> torch.Tensor:
         """The packet centre ``(x, y, th)`` in cells (float64), one row per network.
@@ -376,6 +525,9 @@ class PoseCellNetwork(nn.Module):
         """
         b = self.batch_size
         if b == 1 and type(vtrans) is float and type(vrot) is float and type(dt) is float:
+            if self._numpy and self.activity.device.type == "cpu":
+                self.step_one(vtrans, vrot, dt)
+                return self._best.clone()
             vt, vr, d = np.array([vtrans]), np.array([vrot]), np.array([dt])  # fast path
             finite = math.isfinite(vtrans) and math.isfinite(vrot) and math.isfinite(dt)
         else:
@@ -388,12 +540,32 @@ class PoseCellNetwork(nn.Module):
         trans = vt * d / self.params.pc_cell_x_size  # cells along each layer's heading
         rot = vr * d / (2.0 * math.pi / self.dims[2])  # theta cells
         with torch.no_grad():
+            if self._numpy and self.activity.device.type == "cpu":
+                self._step_numpy(float(trans[0]), float(rot[0]))
+                return self._best.clone()  # (not reached with Python floats: step_one)
             if self.method == "crop":
                 peak = self._step_crop(trans, rot)
             else:
                 peak = self._step_full(trans, rot)
             self._best = self._decode(peak)
         return self._best.clone()
+
+    def step_one(self, vtrans: float, vrot: float, dt: float) -> tuple[float, float, float]:
+        """:meth:`step` for one network (``B == 1``) with Python floats in and out: the
+        numpy path without tensor wrapping where it applies (what :class:`PoseCells`
+        calls every frame).
+
+        Returns:
+            The packet centre ``(x, y, th)`` in cells.
+        """
+        if not (self._numpy and self.activity.device.type == "cpu" and self.batch_size == 1):
+            c = self.step(float(vtrans), float(vrot), float(dt))[0].tolist()
+            return (c[0], c[1], c[2])
+        if not (math.isfinite(vtrans) and math.isfinite(vrot) and math.isfinite(dt)):
+            raise InputError(f"odometry must be finite, got vtrans={vtrans}, vrot={vrot}, dt={dt}")
+        trans = vtrans * dt / self.params.pc_cell_x_size  # the same arithmetic as step()
+        rot = vrot * dt / (2.0 * math.pi / self.dims[2])
+        return self._step_numpy(trans, rot)
 
     def _step_full(self, trans: np.ndarray, rot: np.ndarray) -> torch.Tensor | np.ndarray:
         if self.method == "conv3d":
@@ -502,19 +674,101 @@ class PoseCellNetwork(nn.Module):
             torch.lerp(g0, torch.roll(g0, 1, dims=axis), w, out=g0)
         pool[0], pool[1] = g0, a
 
+    def _shift_one(
+        self, pool: list[torch.Tensor], step: np.ndarray, w: np.ndarray, axis: int
+    ) -> None:
+        """``pool[0] + w (pool[0] moved by step - pool[0])`` per layer (``step``, ``w``
+        ``(B, T)``; ``step`` is +-1): OpenRatSLAM's one-cell weights, extrapolating when
+        ``w > 1``. The result becomes ``pool[0]``."""
+        a, g0 = pool[0], pool[1]
+        n = a.shape[axis]
+        dev = a.device
+        key = ("one", axis, tuple(a.shape), step.tobytes(), dev)
+        index = self._gather_cache.get(key)
+        if index is None:
+            shape = [1, 1, 1, 1]
+            shape[axis] = n
+            lead = step.shape + (1,) * (4 - step.ndim)
+            idx = np.remainder(np.arange(n).reshape(shape) - step.reshape(lead), n)
+            index = torch.from_numpy(idx).to(dev).expand(a.shape)
+            if len(self._gather_cache) > 256:
+                self._gather_cache = {}
+            self._gather_cache[key] = index
+        torch.gather(a, axis, index, out=g0)
+        wt = torch.from_numpy(w.reshape((*w.shape, 1, 1))).to(device=dev, dtype=a.dtype)
+        torch.lerp(a, g0, wt, out=g0)
+        pool[0], pool[1] = g0, a
+
+    def _edge_loss_torch(
+        self,
+        out: torch.Tensor,
+        src: torch.Tensor,
+        plan: dict[str, np.ndarray],
+        starts: tuple[np.ndarray, np.ndarray] | None,
+    ) -> None:
+        """The batched form of :meth:`_np_edge_loss` (``starts``: the crop's y and x
+        starts per network, None for the whole ring)."""
+        b, t, ly, lx = out.shape
+        n = self.dims[0]
+        ends = np.array([0, n - 1])
+        pos = []
+        for start, length in zip(
+            starts if starts is not None else (np.zeros(b, np.int64), np.zeros(b, np.int64)),
+            (ly, lx),
+            strict=True,
+        ):
+            p = np.remainder(ends[None, :] - start[:, None], n)  # (B, 2)
+            pos.append(np.where(p < length, p, -1))
+        if (pos[0] < 0).all() or (pos[1] < 0).all():
+            return
+        bb = np.repeat(np.arange(b), t).reshape(b, t)
+        kk = np.tile(np.arange(t), b).reshape(b, t)
+        take = torch.zeros(b, t, dtype=out.dtype, device=out.device)
+        for m in range(2):
+            yy = np.take_along_axis(pos[0], plan["src"][:, :, m, 0], axis=1)
+            xx = np.take_along_axis(pos[1], plan["src"][:, :, m, 1], axis=1)
+            ok = (yy >= 0) & (xx >= 0)
+            if ok.any():
+                ix = tuple(torch.from_numpy(v[ok]).to(out.device) for v in (bb, kk, yy, xx))
+                w = torch.from_numpy(plan["lost"][:, :, m][ok]).to(out.device, out.dtype)
+                take[torch.from_numpy(bb[ok]), torch.from_numpy(kk[ok])] += w * src[ix]
+        cy = np.take_along_axis(pos[0], plan["corner"][:, :, 0], axis=1)
+        cx = np.take_along_axis(pos[1], plan["corner"][:, :, 1], axis=1)
+        ok = (cy >= 0) & (cx >= 0)
+        if ok.any():
+            ix = tuple(torch.from_numpy(v[ok]).to(out.device) for v in (bb, kk, cy, cx))
+            out.index_put_(ix, -take[ix[0], ix[1]], accumulate=True)
+
     def _path_integrate(
-        self, pool: list[torch.Tensor], trans: np.ndarray, rot: np.ndarray, th_start: np.ndarray
+        self,
+        pool: list[torch.Tensor],
+        trans: np.ndarray,
+        rot: np.ndarray,
+        th_start: np.ndarray,
+        starts_yx: tuple[np.ndarray, np.ndarray] | None = None,
     ) -> torch.Tensor:
         """Translate every theta layer (layer ``k`` of ``pool[0]`` is global layer
         ``th_start + k``) along its heading by ``trans`` cells (negative: backwards),
-        then shift theta by ``rot`` cells. Returns the result (one of ``pool``)."""
+        then shift theta by ``rot`` cells. Returns the result (one of ``pool``).
+        ``starts_yx``: the crop's global y and x starts (for the edge loss)."""
         if trans.any():
             n_th = self.dims[2]
             k = (th_start[:, None] + np.arange(pool[0].shape[1])[None, :]) % n_th
-            direction = k * (2.0 * math.pi / n_th) + np.where(trans < 0, math.pi, 0.0)[:, None]
-            mag = np.abs(trans)[:, None]
-            self._shift_axis(pool, mag * np.cos(direction), 3)
-            self._shift_axis(pool, mag * np.sin(direction), 2)
+            if self._one_cell:
+                plan = self._translation_plan(trans, k)
+                src = pool[0].clone() if self._edge_loss else pool[0]
+                self._shift_one(pool, plan["step_x"], plan["w_x"], 3)
+                self._shift_one(pool, plan["step_y"], plan["w_y"], 2)
+                if self._edge_loss:
+                    self._edge_loss_torch(pool[0], src, plan, starts_yx)
+            else:
+                direction = k * (2.0 * math.pi / n_th) + np.where(trans < 0, math.pi, 0.0)[:, None]
+                mag = np.abs(trans)[:, None]
+                cx, cy = mag * np.cos(direction), mag * np.sin(direction)
+                if not self._swap_axes:  # OpenRatSLAM: layer k along (sin, cos)
+                    cx, cy = cy, cx
+                self._shift_axis(pool, cx, 3)
+                self._shift_axis(pool, cy, 2)
         if rot.any():
             self._shift_axis(pool, rot, 1)
         return pool[0]
@@ -568,7 +822,8 @@ class PoseCellNetwork(nn.Module):
         act = self.activity.view(b, -1)
         crop = torch.gather(act, 1, flat).view(b, lt, ly, lx)
         pool = self._dynamics(crop, (circ[0], circ[1], circ[2]))
-        a = self._path_integrate(pool, trans, rot, starts[0]).reshape(b, -1)
+        a = self._path_integrate(pool, trans, rot, starts[0], (starts[1], starts[2]))
+        a = a.reshape(b, -1)
         act.scatter_(1, flat, a)
         # the new occupancy, from the crop (every other cell is zero)
         nz: Any = (a != 0).cpu().numpy().reshape(b, lt, ly, lx)
@@ -589,6 +844,391 @@ class PoseCellNetwork(nn.Module):
         # the most active cell; ties go to the lowest (th, y, x) index as in a full scan
         top = a.amax(dim=1, keepdim=True)
         return torch.where(a == top, flat, n_t * n_y * n_x).amin(dim=1)
+
+    # ------------------------------------------------------- numpy (B == 1)
+    def _np_matrix(self, which: str, n: int, circular: bool) -> np.ndarray:
+        key = (which, n, circular)
+        m = self._np_mats.get(key)
+        if m is None:
+            kernel = self._ke if which == "e" else self._ki
+            dt = np.float64 if self.dtype == torch.float64 else np.float32
+            m = np.ascontiguousarray(_ring_matrix(kernel, n, circular).astype(dt))
+            self._np_mats[key] = m
+        return m
+
+    def _np_conv(self, a: np.ndarray, which: str, circ: tuple[bool, bool, bool]) -> np.ndarray:
+        """Separable 3D convolution of ``a`` (T, Y, X) by three matrix products."""
+        t, y, x = a.shape
+        mx = self._np_matrix(which, x, circ[2])
+        my = self._np_matrix(which, y, circ[1])
+        mt = self._np_matrix(which, t, circ[0])
+        out = (a.reshape(t * y, x) @ mx.T).reshape(t, y, x)
+        out = np.matmul(my, out)
+        return (mt @ out.reshape(t, y * x)).reshape(t, y, x)
+
+    def _np_arcs(self, act: np.ndarray) -> list[tuple[int, int]]:
+        st = self._np_state
+        key = (self.activity.data_ptr(), self.activity._version)
+        if st["arcs"] is None or st["key"] != key:
+            nz: np.ndarray = np.not_equal(act, 0)
+            t2 = np.asarray(nz.any(axis=2))
+            st["arcs"] = [_arc(t2.any(axis=1)), _arc(t2.any(axis=0)), _arc(nz.any(axis=(0, 1)))]
+            st["key"] = key
+        return st["arcs"]
+
+    def _np_shift_index(
+        self, shape: tuple[int, int, int], axis: int, shifts: np.ndarray
+    ) -> np.ndarray:
+        """Flat gather index moving layer ``k`` of a ``shape`` array by ``shifts[k]`` cells
+        along ``axis`` (1: y, 2: x), wrapping on the array's own length (cached)."""
+        key = (shape, axis, shifts.tobytes())
+        idx = self._np_index.get(key)
+        if idx is None:
+            t, y, x = shape
+            k = np.arange(t)[:, None, None]
+            j = np.arange(y)[None, :, None]
+            i = np.arange(x)[None, None, :]
+            if axis == 2:
+                i = np.remainder(i - shifts[:, None, None], x)
+            else:
+                j = np.remainder(j - shifts[:, None, None], y)
+            idx = ((k * y + j) * x + i).reshape(-1)
+            if len(self._np_index) > 512:
+                self._np_index = {}
+            self._np_index[key] = idx
+        return idx
+
+    def _geometry(self, backwards: bool) -> dict[str, np.ndarray]:
+        """Per global theta layer, the parts of the path integration that do not depend on
+        the distance (cached per direction of travel): ``coef_y``, ``coef_x`` (the move
+        per cell of translation), ``step_y``, ``step_x`` (one-cell: the neighbour's
+        shift), ``sin``, ``cos`` (of ``dir90``), ``src`` ``(TH, 2, 2)`` and ``corner``
+        ``(TH, 2)`` (the edge loss's cells as (y_is_last, x_is_last))."""
+        key = (bool(backwards), self._one_cell, self._swap_axes, self.dims[2])
+        g = self._geo.get(key)
+        if g is not None:
+            return g
+        n_t = self.dims[2]
+        layers = np.arange(n_t)
+        add = math.pi if backwards else 0.0
+        g = {}
+        if not self._one_cell:
+            direction = layers * (2.0 * math.pi / n_t) + add
+            cx, cy = np.cos(direction), np.sin(direction)
+            if not self._swap_axes:  # OpenRatSLAM: (sin, cos)
+                cx, cy = cy, cx
+            g["coef_y"], g["coef_x"] = cy, cx
+        else:  # OpenRatSLAM's path_integration, its own arithmetic
+            direction = layers * ((2.0 * math.pi) / n_t) + add
+            q = np.floor(direction * 2 / math.pi)
+            d90 = direction - q * math.pi / 2
+            sin, cos = np.sin(d90), np.cos(d90)  # a = v sin along +i, b = v cos along +j
+            tab = _QUADRANTS[np.remainder(q.astype(np.int64), 4)]  # (TH, 5, 2)
+            ax = 1 if self._swap_axes else 0  # "math": the mirror across the diagonal
+            di, dj = tab[:, 0, :], tab[:, 1, :]
+            i_on_y = di[:, ax] != 0  # +i moves along global y (else x)
+            sign_i = di[:, ax] + di[:, 1 - ax]  # the non-zero component
+            sign_j = dj[:, ax] + dj[:, 1 - ax]
+            g["step_y"] = np.where(i_on_y, sign_i, sign_j)
+            g["step_x"] = np.where(i_on_y, sign_j, sign_i)
+            g["coef_y"] = np.where(i_on_y, sin, cos)
+            g["coef_x"] = np.where(i_on_y, cos, sin)
+            g["sin"], g["cos"] = sin, cos
+            cells = tab[:, 2:, :]
+            if self._swap_axes:
+                cells = cells[..., ::-1]
+            g["src"] = np.ascontiguousarray(cells[:, :2, :])
+            g["corner"] = np.ascontiguousarray(cells[:, 2, :])
+        self._geo[key] = g
+        return g
+
+    def _translation_plan(self, trans: np.ndarray, layers: np.ndarray) -> dict[str, np.ndarray]:
+        """Per theta layer, how path integration moves it in (y, x).
+
+        Args:
+            trans: ``(B,)`` translation in cells (signed).
+            layers: ``(B, T)`` global theta layer of each layer.
+
+        Returns:
+            ``shift_y``, ``shift_x`` (integer base shift), ``step_y``, ``step_x`` (the
+            neighbour's shift, base +- 1) and ``w_y``, ``w_x`` (the neighbour's weight),
+            all ``(B, T)``: ``out = take(base) + w (take(step) - take(base))``. With the
+            edge loss, also ``lost`` ``(B, T, 2)`` weights and ``src`` ``(B, T, 2, 2)``,
+            ``corner`` ``(B, T, 2)`` cells as (y_is_last, x_is_last).
+        """
+        back = trans < 0
+        g0, g1 = self._geometry(False), self._geometry(True)
+        if not back.any() or back.all():
+            g = g1 if back.all() else g0
+            geo = {k: v[layers] for k, v in g.items()}
+        else:
+            geo = {}
+            for k, v in g0.items():
+                sel = back.reshape((-1,) + (1,) * (v.ndim))
+                geo[k] = np.where(sel, g1[k][layers], v[layers])
+        v = np.abs(trans)[:, None]
+        plan: dict[str, np.ndarray] = {}
+        if not self._one_cell:
+            for name in ("y", "x"):
+                c = v * geo["coef_" + name]
+                fl = np.floor(c)
+                plan["shift_" + name] = fl.astype(np.int64)
+                plan["step_" + name] = fl.astype(np.int64) + 1
+                plan["w_" + name] = c - fl
+            return plan
+        zero = np.zeros(layers.shape, dtype=np.int64)
+        plan["shift_y"], plan["shift_x"] = zero, zero
+        plan["step_y"], plan["step_x"] = geo["step_y"], geo["step_x"]
+        plan["w_y"], plan["w_x"] = v * geo["coef_y"], v * geo["coef_x"]
+        if self._edge_loss:
+            sin, cos = geo["sin"], geo["cos"]
+            se = v * sin * (1.0 - v * cos)
+            nw = v * cos * (1.0 - v * sin)
+            plan["lost"] = np.stack([se, nw], axis=-1)
+            plan["src"], plan["corner"] = geo["src"], geo["corner"]
+        return plan
+
+    def _np_translate(
+        self,
+        a: np.ndarray,
+        trans: float,
+        layers: np.ndarray,
+        box_y: tuple[int, int, bool],
+        box_x: tuple[int, int, bool],
+    ) -> np.ndarray:
+        """Move every layer of the crop ``a`` (T, Y, X) along its heading."""
+        g = self._geometry(trans < 0)
+        v = abs(trans)
+        if self._one_cell:  # per crop: the weights per cell of travel and gather indices
+            key = (trans < 0, a.shape, int(layers[0]), a.dtype.char)
+            crop_geo = self._np_index.get(key)
+            if crop_geo is None:
+                # the coefficients stay float64: the weight v * coef is rounded to the
+                # activity's dtype once, as on the general path (float32 bit for bit)
+                crop_geo = (
+                    g["coef_x"][layers][:, None, None],
+                    g["coef_y"][layers][:, None, None],
+                    self._np_shift_index(a.shape, 2, g["step_x"][layers]),
+                    self._np_shift_index(a.shape, 1, g["step_y"][layers]),
+                )
+                self._np_index[key] = crop_geo
+            cx, cy, ix, iy = crop_geo
+            src = a
+            s1 = a.reshape(-1).take(ix).reshape(a.shape)
+            a = a + (v * cx).astype(a.dtype, copy=False) * (s1 - a)
+            s1 = a.reshape(-1).take(iy).reshape(a.shape)
+            a = a + (v * cy).astype(a.dtype, copy=False) * (s1 - a)
+            if self._edge_loss:
+                self._np_edge_loss(a, src, trans, layers, box_y, box_x)
+            return a
+        plan: dict[str, np.ndarray] = {}
+        for name in ("y", "x"):
+            c = v * g["coef_" + name][layers]
+            if self._one_cell:
+                plan["shift_" + name] = np.zeros(len(layers), dtype=np.int64)
+                plan["step_" + name] = g["step_" + name][layers]
+                plan["w_" + name] = c
+            else:
+                fl = np.floor(c)
+                plan["shift_" + name] = fl.astype(np.int64)
+                plan["step_" + name] = plan["shift_" + name] + 1
+                plan["w_" + name] = c - fl
+        shape = a.shape
+        src = a
+        for axis, name in ((2, "x"), (1, "y")):
+            base, step = plan["shift_" + name], plan["step_" + name]
+            w = plan["w_" + name].astype(a.dtype, copy=False)
+            flat = a.reshape(-1)
+            s0 = a if not base.any() else flat[self._np_shift_index(shape, axis, base)]
+            s1 = flat[self._np_shift_index(shape, axis, step)].reshape(shape)
+            s0 = s0.reshape(shape)
+            a = s0 + w[:, None, None] * (s1 - s0)
+        if self._edge_loss:
+            self._np_edge_loss(a, src, trans, layers, box_y, box_x)
+        return a
+
+    def _np_edge_loss(
+        self,
+        out: np.ndarray,
+        src: np.ndarray,
+        trans: float,
+        layers: np.ndarray,
+        box_y: tuple[int, int, bool],
+        box_x: tuple[int, int, bool],
+    ) -> None:
+        """Take from ``out`` what OpenRatSLAM drops at the wrap: the moves of two corner
+        cells of each layer (of ``src``, before the move) across the edge."""
+        (sy, ly, _), (sx, lx, _) = box_y, box_x
+        n = self.dims[0]
+        # local position of global cell 0 and n - 1 on each axis (-1: outside the crop)
+        py = [(0 - sy) % n, (n - 1 - sy) % n]
+        px = [(0 - sx) % n, (n - 1 - sx) % n]
+        py = [p if p < ly else -1 for p in py]
+        px = [p if p < lx else -1 for p in px]
+        if max(py) < 0 or max(px) < 0:
+            return  # no corner of the ring inside the crop
+        yy = [p for p in py if p >= 0]
+        xx = [p for p in px if p >= 0]
+        if not src[:, yy][:, :, xx].any():
+            return  # every corner cell is empty: nothing crosses there
+        g = self._geometry(trans < 0)
+        v = abs(trans)
+        sin, cos = g["sin"][layers], g["cos"][layers]
+        lost = np.stack([v * sin * (1.0 - v * cos), v * cos * (1.0 - v * sin)], axis=1)
+        src_cells, corner = g["src"][layers], g["corner"][layers]  # (T, 2, 2), (T, 2)
+        pos_y, pos_x = np.array(py), np.array(px)
+        k = np.arange(out.shape[0])
+        cy, cx = pos_y[corner[:, 0]], pos_x[corner[:, 1]]
+        take = np.zeros(out.shape[0], dtype=out.dtype)
+        for m in range(2):  # the two dropped moves
+            sy_, sx_ = pos_y[src_cells[:, m, 0]], pos_x[src_cells[:, m, 1]]
+            ok = (sy_ >= 0) & (sx_ >= 0)
+            take[ok] += lost[ok, m] * src[k[ok], sy_[ok], sx_[ok]]
+        ok = (cy >= 0) & (cx >= 0) & (take != 0)
+        np.subtract.at(out, (k[ok], cy[ok], cx[ok]), take[ok])
+
+    def _np_rotate(self, a: np.ndarray, rot: float) -> np.ndarray:
+        """OpenRatSLAM's theta shift of the crop ``a`` by ``rot`` cells (fraction linear)."""
+        r = abs(rot)
+        fl = math.floor(r)
+        w = r - fl
+        if w == 0.0:
+            w = 1.0  # its "while (weight > 1) weight -= 1" stops at 1
+        sign = -1 if rot < 0 else 1
+        s1, s2 = sign * fl, sign * math.ceil(r)
+        out = _roll0(a, s1) * (1.0 - w)
+        out += _roll0(a, s2) * w
+        return out
+
+    def _step_numpy(self, trans: float, rot: float) -> tuple[float, float, float]:
+        """One step of a single CPU network in numpy, on the packet's crop."""
+        p = self.params
+        act = self.activity.detach().numpy()[0]
+        n_t, n_y, n_x = act.shape
+        arcs = self._np_arcs(act)
+        move_xy = math.ceil(abs(trans)) + 1 if trans != 0 else 0
+        move_th = math.ceil(abs(rot)) + 1 if rot != 0 else 0
+        # every cell the excitation does not reach ends at zero (global inhibition), so
+        # the crop needs the excitation's reach and the move only
+        eh = max(p.pc_w_e_dim // 2, p.pc_w_e_dim - 1 - p.pc_w_e_dim // 2)
+        boxes = []
+        for (start, ln), n, m in zip(
+            arcs, (n_t, n_y, n_x), (eh + move_th, eh + move_xy, eh + move_xy), strict=True
+        ):
+            if ln == 0:
+                raise InputError(
+                    "pose-cell activity is all zero; reset() or inject() before stepping"
+                )
+            if ln + 2 * m >= n:
+                boxes.append((0, n, True))
+            else:
+                boxes.append(((start - m) % n, ln + 2 * m, False))
+        idx = [
+            np.remainder(np.arange(s, s + ln), n)
+            for (s, ln, _), n in zip(boxes, (n_t, n_y, n_x), strict=True)
+        ]
+        circ = (boxes[0][2], boxes[1][2], boxes[2][2])
+        self._np_state["crop"] = (boxes[0][1], boxes[1][1], boxes[2][1])
+        shape = (boxes[0][1], boxes[1][1], boxes[2][1])
+        flat = ((idx[0][:, None, None] * n_y + idx[1][None, :, None]) * n_x + idx[2]).reshape(-1)
+        act_flat = act.reshape(-1)
+        crop = act_flat.take(flat).reshape(shape)
+        e = self._np_conv(crop, "e", circ)
+        a = e - self._np_conv(e, "i", circ)
+        a -= p.pc_global_inhib
+        np.maximum(a, 0.0, out=a)
+        total = a.sum()
+        if not total > 0:
+            raise InputError(
+                "pose-cell activity died out (every cell <= pc_global_inhib); lower "
+                "pc_global_inhib or reset()/inject() the network"
+            )
+        a /= total
+        if trans != 0:
+            a = self._np_translate(a, trans, idx[0], boxes[1], boxes[2])
+        if rot != 0:
+            a = self._np_rotate(a, rot)
+        act_flat[flat] = a.reshape(-1)
+        # the new non-zero arcs, from the crop (every other cell is zero)
+        nz: np.ndarray = np.not_equal(a, 0)
+        t2 = np.asarray(nz.any(axis=2))
+        arcs = []
+        for mask, (start, _ln, whole), n in zip(
+            (t2.any(axis=1), t2.any(axis=0), nz.any(axis=(0, 1))),
+            boxes,
+            (n_t, n_y, n_x),
+            strict=True,
+        ):
+            if whole:
+                arcs.append(_arc(mask))
+            else:
+                on = np.flatnonzero(mask)
+                arcs.append(
+                    ((start + int(on[0])) % n, int(on[-1] - on[0]) + 1) if on.size else (0, 0)
+                )
+        self._np_state["arcs"] = arcs
+        # the most active cell; ties go to the lowest global (th, y, x) index
+        top = a.max()
+        hits = np.flatnonzero(a == top)
+        _, ly, lx = a.shape
+        kt, ky, kx = hits // (ly * lx), (hits // lx) % ly, hits % lx
+        cells = (idx[0][kt] * n_y + idx[1][ky]) * n_x + idx[2][kx]
+        peak = int(cells.min())
+        return self._decode_np(act, peak)
+
+    def _decode_lookups(self, n: int) -> tuple[np.ndarray, np.ndarray]:
+        """find_best's sin and cos lookups, ``(i + 1) 2 pi / n``, with its arithmetic."""
+        lk = self._lookups.get(n)
+        if lk is None:
+            ang = (np.arange(n, dtype=np.float64) + 1.0) * 2.0 * math.pi / float(n)
+            lk = (np.sin(ang), np.cos(ang))
+            self._lookups[n] = lk
+        return lk
+
+    def _decode_np(self, act: np.ndarray, peak: int) -> tuple[float, float, float]:
+        """The centre of one network (``act`` (T, Y, X)) around the flat ``peak``; also
+        written to :attr:`best`."""
+        n_x, n_y, n_t = self.dims
+        pt, py, px = peak // (n_y * n_x), (peak // n_x) % n_y, peak % n_x
+        (wx, ex, _), (wy, ey, _), (wt, et, _) = self._rings()
+        ix, iy, it = wx[px], wy[py], wt[pt]
+        flat = ((it[:, None, None] * n_y + iy[None, :, None]) * n_x + ix).reshape(-1)
+        w = len(ix)
+        cube = act.reshape(-1).take(flat).reshape(len(it), len(iy), w).astype(np.float64)
+        c2 = cube.sum(axis=0)
+        sums = (c2.sum(axis=0), c2.sum(axis=1), cube.sum(axis=(1, 2)))
+        rings = (ix, iy, it)
+        res: list[float] = []
+        if self._cpp_decode:
+            for sm, ring, n in zip(sums, rings, (n_x, n_y, n_t), strict=True):
+                res.append(self._cpp_position(sm, ring, n))
+        else:
+            for sm, ring, ph, n in zip(sums, rings, (ex, ey, et), (n_x, n_y, n_t), strict=True):
+                v = np.angle((sm * ph[ring]).sum())
+                pos = float(np.remainder(v * (n / (2.0 * math.pi)), float(n)))
+                res.append(pos - n if pos >= n else pos)
+        centre = (res[0], res[1], res[2])
+        if self.best.device.type == "cpu":
+            self.best.numpy()[0] = centre
+        else:
+            self.best.copy_(torch.tensor([centre], dtype=torch.float64))
+        return centre
+
+    def _cpp_position(self, sums: np.ndarray, ring: np.ndarray, n: int) -> float:
+        """find_best on one axis: ``atan2`` of the (i + 1) phasor sums (in cell order),
+        times ``n / 2 pi``, minus one cell, then wrapped into ``[0, n]``."""
+        sin_l, cos_l = self._decode_lookups(n)
+        start = int(np.argmin(ring))  # the window in cell order: it wraps at most once
+        r = np.concatenate((ring[start:], ring[:start])) if start else ring
+        w = np.concatenate((sums[start:], sums[:start])) if start else sums
+        s1 = float(np.cumsum(sin_l[r] * w)[-1])  # sequential, in cell order, as its loop
+        s2 = float(np.cumsum(cos_l[r] * w)[-1])
+        x = math.atan2(s1, s2) * n / (2.0 * math.pi) - 1.0
+        while x < 0:
+            x += n
+        while x > n:
+            x -= n
+        return x
 
     # --------------------------------------------------------------- decode
     def _rings(self) -> list[tuple[np.ndarray, np.ndarray, int]]:
@@ -631,6 +1271,9 @@ class PoseCellNetwork(nn.Module):
                 (cube.sum(axis=(2, 3)), it, et, n_t),
             )
         ):
+            if self._cpp_decode:  # one network at a time: find_best's own summation order
+                out[:, col] = [self._cpp_position(sums[i], ring[i], n) for i in range(b)]
+                continue
             v = np.angle((sums * phasor[ring]).sum(1))
             pos = np.remainder(v * (n / (2.0 * math.pi)), float(n))
             out[:, col] = np.where(pos >= n, pos - n, pos)
@@ -655,6 +1298,17 @@ class PoseCellNetwork(nn.Module):
         e = _as_batch(energy, b, "energy")
         if not np.isfinite(e).all():
             raise InputError(f"injected energy must be finite, got {energy}")
+        if self._numpy and self.activity.device.type == "cpu":
+            act = self.activity.detach().numpy()[0]
+            key = (self.activity.data_ptr(), self.activity._version)
+            act[it[0], iy[0], ix[0]] += e[0]
+            if e[0] != 0 and self._arcs is not None and self._np_state["key"] == key:
+                cell = (int(it[0]), int(iy[0]), int(ix[0]))
+                self._arcs = [
+                    _arc_with(arc, c, n)
+                    for arc, c, n in zip(self._arcs, cell, (n_t, n_y, n_x), strict=True)
+                ]
+            return
         occ = self._occupancy() if self.method == "crop" else None
         dev = self.device
         with torch.no_grad():
@@ -771,11 +1425,12 @@ class PoseCells:
     def on_view_template(self, match: ViewMatch) -> None:
         """Learn a new template at the packet centre, or inject energy for a known one.
 
-        A template among the last 10 learnt injects nothing, also while fewer than 10
-        exist (the reference notes' rule; OpenRatSLAM's unsigned arithmetic injects
-        then). Re-seeing the current template raises its decay by ``vt_active_decay``;
-        the energy ``pc_vt_inject_energy / 30 * (30 - exp(1.2 decay))`` goes, if
-        positive, to the template's cell with theta corrected by the relative angle.
+        A template among the last 10 learnt injects nothing; while fewer than 10 exist,
+        every known template injects (``vt_inject_rule="openratslam"``: its unsigned
+        ``size - 10`` wraps) or none does (``"last_10"``, the notes' rule). Re-seeing
+        the current template raises its decay by ``vt_active_decay``; the energy
+        ``pc_vt_inject_energy / 30 * (30 - exp(1.2 decay))`` goes, if positive, to the
+        template's cell with theta corrected by the relative angle.
         Then every decay relaxes by ``pc_vt_restore`` (not below ``vt_active_decay``).
 
         Raises:
@@ -794,7 +1449,9 @@ class PoseCells:
         if vt == n:
             self.template_pc = np.concatenate([self.template_pc, np.asarray([self._best])], axis=0)
             self.template_decay = np.append(self.template_decay, p.vt_active_decay)
-        elif vt < n - RECENT_TEMPLATES:
+        elif vt < n - RECENT_TEMPLATES or (
+            p.vt_inject_rule == "openratslam" and n < RECENT_TEMPLATES
+        ):  # OpenRatSLAM's unsigned "size - 10" wraps while fewer than 10 exist
             if vt == self.current_vt:
                 self.template_decay[vt] += p.vt_active_decay
             energy = p.pc_vt_inject_energy / 30.0 * (30.0 - math.exp(1.2 * self.template_decay[vt]))
@@ -824,8 +1481,7 @@ class PoseCells:
         Returns:
             The :class:`~torchratslam.graph.messages.Action` for the experience map.
         """
-        c = self.network.step(float(vtrans), float(vrot), float(dt))[0].tolist()
-        self._best = (c[0], c[1], c[2])
+        self._best = self.network.step_one(float(vtrans), float(vrot), float(dt))
         self._odo_update = True
         return self._decide()
 

@@ -79,7 +79,9 @@ def test_run_writes_every_output(run_out):
     assert len(traj) == 40 and [int(r["frame"]) for r in traj] == list(range(40))
     # each trajectory row carries the final pose of its experience
     pose = {int(r["id"]): (float(r["x"]), float(r["y"]), float(r["th"])) for r in exps}
-    for r in traj:
+    # frame 0 has no experience yet (OpenRatSLAM's first action comes at frame 1)
+    assert int(traj[0]["experience_id"]) == -1 and traj[0]["x"] in ("", "nan")
+    for r in traj[1:]:
         assert (float(r["x"]), float(r["y"]), float(r["th"])) == pose[int(r["experience_id"])]
     # the saved state loads back with the same map
     from torchratslam.maps.state import load_state

@@ -49,10 +49,20 @@ def signed_delta(a1: float, a2: float) -> float:
 class RefMap:
     """OpenRatSLAM's experience map, restated with lists and loops."""
 
-    def __init__(self, loops: int, correction: float, initial_deg: float) -> None:
+    def __init__(
+        self,
+        loops: int,
+        correction: float,
+        initial_deg: float,
+        *,
+        first_at_origin: bool = False,
+        per_link_time: bool = False,
+    ) -> None:
         self.exps: list[dict] = []
         self.links: list[dict] = []
         self.loops, self.correction = loops, correction
+        # False, False: OpenRatSLAM (exp_first_at_origin, exp_link_time="since_start")
+        self.first_at_origin, self.per_link_time = first_at_origin, per_link_time
         self.cur, self.prev = -1, -1
         self.ax, self.ay, self.af, self.at = 0.0, 0.0, initial_deg * PI / 180, 0.0
 
@@ -64,13 +74,17 @@ class RefMap:
 
     def create(self) -> int:
         if self.cur < 0:
-            x, y = 0.0, 0.0
+            # OpenRatSLAM: experiences[current_exp_id = 0] is the new one, zeroed
+            x, y = (0.0, 0.0) if self.first_at_origin else (self.ax, self.ay)
         else:
             x, y = self.exps[self.cur]["x"] + self.ax, self.exps[self.cur]["y"] + self.ay
         self.exps.append({"x": x, "y": y, "th": clip_rad_180(self.af), "from": []})
         new = len(self.exps) - 1
         if self.cur >= 0:
             self.link(self.cur, new, 0.0)
+        elif not self.first_at_origin:  # on_set_experience(0, 0) returns early
+            self.cur = new
+            return new
         self.set(new, 0.0)
         return new
 
@@ -92,7 +106,8 @@ class RefMap:
                 "dt": self.at,
             }
         )
-        self.at = 0.0
+        if self.per_link_time:
+            self.at = 0.0
         self.exps[frm]["from"].append(len(self.links) - 1)
         return True
 
@@ -205,10 +220,15 @@ def random_session(seed: int, steps: int, em: ExperienceMap, ref: RefMap | None 
             ref.relax()
 
 
+TORCHRATSLAM_EM = {"exp_first_at_origin": True, "exp_link_time": "per_link"}
+
+
+@pytest.mark.parametrize("behaviour", ["openratslam", "torchratslam"])
 @pytest.mark.parametrize("seed", [0, 1, 2])
-def test_random_sessions_match_openratslam_step_by_step(seed):
-    em, backend = make(loops=4, exp_initial_em_deg=140.0)
-    ref = RefMap(loops=4, correction=0.5, initial_deg=140.0)
+def test_random_sessions_match_openratslam_step_by_step(seed, behaviour):
+    own = behaviour == "torchratslam"
+    em, backend = make(loops=4, exp_initial_em_deg=140.0, **(TORCHRATSLAM_EM if own else {}))
+    ref = RefMap(loops=4, correction=0.5, initial_deg=140.0, first_at_origin=own, per_link_time=own)
     rng_steps = 120
     rng = np.random.default_rng(100 + seed)
     random_session(int(rng.integers(1 << 30)), rng_steps, em, ref)
@@ -223,7 +243,7 @@ def test_random_sessions_match_openratslam_step_by_step(seed):
 
 
 def test_scripted_actions_make_the_expected_nodes_and_links():
-    em, _ = make(loops=0, exp_initial_em_deg=90.0)
+    em, _ = make(loops=0, exp_initial_em_deg=90.0, **TORCHRATSLAM_EM)
     em.apply(Action(ActionKind.CREATE, dest_id=0), frame=0, t=0.0, pc=(1, 2, 3), template_id=7)
     assert em.poses.tolist() == [[0.0, 0.0, pytest.approx(PI / 2)]]
     em.on_odometry(1.0, 0.0, 2.0)  # 2 m north
@@ -485,7 +505,8 @@ def test_converged_relaxation_stops_early_and_matches_always_running():
     _backends_or_skip()
     maps = []
     for tol in (ExperienceMap.relax_tol, 0.0):
-        em = ExperienceMap(ExperienceMapParams(exp_loops=20, exp_backend="alpha"))
+        params = ExperienceMapParams(exp_loops=20, exp_backend="alpha", exp_relax_order="colour")
+        em = ExperienceMap(params)
         em.relax_tol = tol
         calls = []
         relax = em.backend.relax
@@ -511,3 +532,96 @@ def test_converged_relaxation_stops_early_and_matches_always_running():
     assert np.abs(diff).max() < 1e-9
     assert sum(fast_calls) < 0.7 * sum(full_calls)  # it did stop early / skip
     assert len(fast_calls) < len(full_calls)  # ... and skipped settled frames
+
+
+# ------------------------------------------------------------ issue 12: OpenRatSLAM exactly
+def brute_force_sweep(poses: np.ndarray, src, dst, link, passes: int, c: float) -> np.ndarray:
+    """OpenRatSLAM's iterate() restated: experiences by id, their links in insertion order,
+    every pass, in place."""
+    p = poses.tolist()
+    order = sorted(range(len(src)), key=lambda k: (src[k], k))
+    for _ in range(passes):
+        for k in order:
+            f, t = p[src[k]], p[dst[k]]
+            d, heading, facing = link[k]
+            lx = f[0] + d * math.cos(f[2] + heading)
+            ly = f[1] + d * math.sin(f[2] + heading)
+            f[0] += (t[0] - lx) * c
+            f[1] += (t[1] - ly) * c
+            t[0] -= (t[0] - lx) * c
+            t[1] -= (t[1] - ly) * c
+            da = signed_delta(f[2] + facing, t[2])
+            f[2] = clip_rad_180(f[2] + da * c)
+            t[2] = clip_rad_180(t[2] - da * c)
+    return np.array(p)
+
+
+@pytest.mark.parametrize("passes", [1, 7, 400])
+def test_compiled_sweep_is_the_brute_force_loop_bit_for_bit(passes):
+    from torchratslam.graph.backends.alpha import reference_order, sweep_openratslam
+
+    rng = np.random.default_rng(passes)
+    n = 60
+    poses = np.stack([rng.normal(0, 5, n), rng.normal(0, 5, n), rng.uniform(-PI, PI, n)], 1)
+    chain = [(i, i + 1) for i in range(n - 1)]
+    closures = {(int(a), int(b)) for a, b in rng.integers(0, n, (40, 2)) if abs(a - b) > 2}
+    ends = chain + sorted(closures, key=lambda e: rng.uniform())  # closures out of order
+    src = np.array([a for a, _ in ends])
+    dst = np.array([b for _, b in ends])
+    link = np.stack(
+        [
+            rng.uniform(0, 2, len(ends)),
+            rng.uniform(-PI, PI, len(ends)),
+            rng.normal(0, 1, len(ends)),
+        ],
+        1,
+    )
+    want = brute_force_sweep(poses, src.tolist(), dst.tolist(), link.tolist(), passes, 0.5)
+    order = reference_order(np.stack([src, dst], 1))
+    got = np.ascontiguousarray(poses.copy())
+    ran = sweep_openratslam(got, src[order], dst[order], link[order], passes, 0.5)
+    assert np.array_equal(got, want)  # bit for bit, all passes (or an exact fixed point)
+    assert ran == passes or (passes == 400 and ran < passes)
+    # the fixed point it stopped at is exact: one more brute-force pass changes nothing
+    again = brute_force_sweep(got, src.tolist(), dst.tolist(), link.tolist(), 1, 0.5)
+    assert ran == passes or np.array_equal(again, got)
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_default_map_is_openratslams_with_its_own_backend(seed):
+    """The default parameters (OpenRatSLAM's behaviour) and the default backend (the
+    compiled reference-order sweep) against the brute-force reference map."""
+    em = ExperienceMap(ExperienceMapParams(exp_loops=6, exp_initial_em_deg=140.0))
+    assert em.backend.schedule == "openratslam"
+    ref = RefMap(loops=6, correction=0.5, initial_deg=140.0)
+    random_session(200 + seed, 150, em, ref)
+    assert em.num_links > len(em) > 30
+    assert_same(em, ref)
+
+
+def test_first_experience_and_link_times_as_openratslam():
+    em = ExperienceMap(ExperienceMapParams(exp_loops=0, exp_initial_em_deg=0.0))
+    em.on_odometry(1.0, 0.0, 2.0)  # 2 m east before the first experience
+    em.apply(Action(ActionKind.CREATE, dest_id=0))
+    # at the accumulated odometry, accumulators not restarted (on_set_experience(0, 0)
+    # returns early in OpenRatSLAM)
+    assert em.poses.tolist() == [[2.0, 0.0, 0.0]] and (em.accum_x, em.accum_time) == (2.0, 2.0)
+    em.on_odometry(1.0, 0.0, 1.0)
+    em.apply(Action(ActionKind.CREATE, dest_id=1))
+    np.testing.assert_allclose(em.poses[1], [5.0, 0.0, 0.0])  # 2 + the 3 m accumulated
+    em.on_odometry(1.0, 0.0, 1.0)
+    em.apply(Action(ActionKind.CREATE, dest_id=2))
+    # link times: the time since the start of the run (accum_delta_time_s never resets)
+    assert em.links()["dt"].tolist() == [3.0, 4.0]
+    own = ExperienceMap(
+        ExperienceMapParams(
+            exp_loops=0, exp_initial_em_deg=0.0, exp_first_at_origin=True, exp_link_time="per_link"
+        )
+    )
+    own.on_odometry(1.0, 0.0, 2.0)
+    own.apply(Action(ActionKind.CREATE, dest_id=0))
+    assert own.poses.tolist() == [[0.0, 0.0, 0.0]] and (own.accum_x, own.accum_time) == (0.0, 2.0)
+    for k in (1, 2):
+        own.on_odometry(1.0, 0.0, 1.0)
+        own.apply(Action(ActionKind.CREATE, dest_id=k))
+    assert own.links()["dt"].tolist() == [3.0, 1.0]  # the first link also counts frame 0's 2 s

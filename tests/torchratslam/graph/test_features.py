@@ -200,7 +200,9 @@ def _accumulate(start_facing, legs):
 
 @pytest.mark.parametrize("averaging", [True, False])
 def test_repeated_transitions_are_averaged_into_the_link(averaging):
-    em = make(exp_initial_em_deg=0.0, exp_loops=0, exp_link_averaging=averaging)
+    em = make(
+        exp_initial_em_deg=0.0, exp_loops=0, exp_link_averaging=averaging, exp_link_time="per_link"
+    )
     em.apply(Action(ActionKind.CREATE, dest_id=0))
     _drive(em, [(1.0, 0.0, 2.0)])
     em.apply(Action(ActionKind.CREATE, dest_id=1))  # link 0 -> 1: (2, 0, 0), 2 s

@@ -16,6 +16,21 @@ from torchratslam.registry import POSE_CELLS
 
 F64 = torch.float64
 
+#: The project's own pose-cell behaviours (the ``torchratslam`` profile): the tests in
+#: this file check them; OpenRatSLAM's (the defaults) are checked against its own traces
+#: in test_openratslam_traces.py.
+PROJECT = {
+    "pc_decode": "exact",
+    "vt_inject_rule": "last_10",
+    "pc_axis": "math",
+    "pc_wrap": "preserve_mass",
+    "pc_multi_cell": True,
+}
+
+
+def _params(**kw) -> PoseCellParams:
+    return PoseCellParams(**{**PROJECT, **kw})
+
 
 @pytest.fixture(autouse=True, scope="module")
 def _one_thread():
@@ -88,9 +103,7 @@ def packet_net(p: PoseCellParams, cell=None, *, method="crop", dtype=F64, settle
 @pytest.mark.parametrize("method", ["separable", "conv3d"])
 @pytest.mark.parametrize(("e_dim", "i_dim"), [(7, 5), (5, 4)])
 def test_excite_and_inhibit_equal_brute_force_triple_loop(method, e_dim, i_dim):
-    p = PoseCellParams(
-        pc_dim_xy=9, pc_dim_th=10, pc_w_e_dim=e_dim, pc_w_i_dim=i_dim, pc_w_i_var=1.7
-    )
+    p = _params(pc_dim_xy=9, pc_dim_th=10, pc_w_e_dim=e_dim, pc_w_i_dim=i_dim, pc_w_i_var=1.7)
     net = PoseCellNetwork(p, dtype=F64, method=method)
     rng = np.random.default_rng(0)
     a = rng.random((10, 9, 9)) * (rng.random((10, 9, 9)) < 0.3)
@@ -104,7 +117,7 @@ def test_excite_and_inhibit_equal_brute_force_triple_loop(method, e_dim, i_dim):
 
 @pytest.mark.parametrize("method", METHODS)
 def test_a_step_without_motion_equals_brute_force_dynamics(method):
-    p = PoseCellParams(pc_dim_xy=13, pc_dim_th=16)
+    p = _params(pc_dim_xy=13, pc_dim_th=16)
     net = PoseCellNetwork(p, dtype=F64, method=method)
     rng = np.random.default_rng(1)
     a = np.zeros((16, 13, 13))
@@ -119,7 +132,7 @@ def test_a_step_without_motion_equals_brute_force_dynamics(method):
 
 
 def test_crop_equals_full_network_also_when_packets_split_and_rejoin():
-    p = PoseCellParams(pc_dim_xy=31, pc_dim_th=36)
+    p = _params(pc_dim_xy=31, pc_dim_th=36)
     nets = {m: packet_net(p, (29, 1, 35), method=m, settle=5) for m in ("crop", "separable")}
     rng = np.random.default_rng(2)
     crops = set()
@@ -143,7 +156,7 @@ def test_crop_equals_full_network_also_when_packets_split_and_rejoin():
 
 @pytest.mark.parametrize("method", ["crop", "separable"])
 def test_activity_stays_non_negative_and_sums_to_one(method):
-    p = PoseCellParams(pc_dim_xy=15, pc_dim_th=20)
+    p = _params(pc_dim_xy=15, pc_dim_th=20)
     net = PoseCellNetwork(p, 2, dtype=torch.float32, method=method)
     rng = np.random.default_rng(3)
     for t in range(80):
@@ -158,7 +171,7 @@ def test_activity_stays_non_negative_and_sums_to_one(method):
 
 
 def test_packet_without_input_stays_put():
-    p = PoseCellParams()  # 21 x 21 x 36
+    p = _params()  # 21 x 21 x 36
     net = PoseCellNetwork(p, dtype=F64)
     start = net.step(0.0, 0.0, 1.0)[0].numpy()
     for _ in range(200):
@@ -186,7 +199,7 @@ def reference_four_neighbour(layer: np.ndarray, v: float, direction: float) -> n
 
 @pytest.mark.parametrize("v", [0.37, 1.0, -0.8])
 def test_translation_up_to_one_cell_equals_the_four_neighbour_weighting(v):
-    p = PoseCellParams(pc_dim_xy=11, pc_dim_th=12)
+    p = _params(pc_dim_xy=11, pc_dim_th=12)
     net = PoseCellNetwork(p, dtype=F64)
     a = np.random.default_rng(4).random((12, 11, 11))
     out = net.path_integrate(torch.from_numpy(a)[None], v, 0.0)[0].numpy()
@@ -197,7 +210,7 @@ def test_translation_up_to_one_cell_equals_the_four_neighbour_weighting(v):
 
 
 def test_large_translation_is_a_roll_plus_bilinear_fraction():
-    p = PoseCellParams(pc_dim_xy=11, pc_dim_th=8)
+    p = _params(pc_dim_xy=11, pc_dim_th=8)
     net = PoseCellNetwork(p, dtype=F64)
     a = np.random.default_rng(5).random((8, 11, 11))
     v = 3.6
@@ -219,7 +232,7 @@ def test_large_translation_is_a_roll_plus_bilinear_fraction():
 
 
 def test_theta_shift_is_linear_interpolation_between_floor_and_ceil():
-    p = PoseCellParams(pc_dim_xy=5, pc_dim_th=12)
+    p = _params(pc_dim_xy=5, pc_dim_th=12)
     net = PoseCellNetwork(p, dtype=F64)
     a = np.random.default_rng(6).random((12, 5, 5))
     for s in (0.3, 2.75, -1.4, 13.5):
@@ -232,7 +245,7 @@ def test_theta_shift_is_linear_interpolation_between_floor_and_ceil():
 @pytest.mark.parametrize("layer", [0, 4, 9, 13, 18, 22, 27, 31])  # 8+ headings of 36 layers
 @pytest.mark.parametrize("speed", [0.4, 1.6])  # cells per step, below and above one
 def test_constant_odometry_moves_the_centre_along_the_layer_heading(layer, speed):
-    p = PoseCellParams(pc_dim_xy=21, pc_dim_th=36)
+    p = _params(pc_dim_xy=21, pc_dim_th=36)
     net = packet_net(p, (18, 2, layer), settle=15)  # near the x/y edges: it crosses the wrap
     c = net.centre()[0].numpy()
     steps = 12
@@ -251,7 +264,7 @@ def test_constant_odometry_moves_the_centre_along_the_layer_heading(layer, speed
 
 
 def test_negative_speed_moves_backwards():
-    p = PoseCellParams(pc_dim_xy=21, pc_dim_th=36)
+    p = _params(pc_dim_xy=21, pc_dim_th=36)
     net = packet_net(p, (10, 10, 9), settle=15)  # heading 90 degrees: +y
     c0 = net.centre()[0].numpy()
     for _ in range(10):
@@ -261,7 +274,7 @@ def test_negative_speed_moves_backwards():
 
 
 def test_rotation_moves_theta_by_vrot_dt_and_full_turns_return():
-    p = PoseCellParams(pc_dim_xy=11, pc_dim_th=36)
+    p = _params(pc_dim_xy=11, pc_dim_th=36)
     net = packet_net(p, settle=10)
     c0 = net.centre()[0].numpy()
     vrot = 2 * math.pi / 36 * 0.75  # 0.75 theta cells per second
@@ -277,7 +290,7 @@ def test_rotation_moves_theta_by_vrot_dt_and_full_turns_return():
 
 
 def test_repeated_injection_relocalises_the_packet():
-    p = PoseCellParams()
+    p = _params()
     net = packet_net(p, settle=5)
     target = (3, 17, 30)
     for _ in range(40):
@@ -290,7 +303,7 @@ def test_repeated_injection_relocalises_the_packet():
 # ---------------------------------------------------------- batch and dtypes
 @pytest.mark.parametrize("method", ["crop", "separable"])
 def test_batched_equals_looped(method):
-    p = PoseCellParams(pc_dim_xy=17, pc_dim_th=24)
+    p = _params(pc_dim_xy=17, pc_dim_th=24)
     b = 4
     rng = np.random.default_rng(7)
     vt, vr, dt = (
@@ -317,7 +330,7 @@ def test_batched_equals_looped(method):
 
 
 def test_float32_agrees_with_float64():
-    p = PoseCellParams()
+    p = _params()
     nets = [PoseCellNetwork(p, dtype=d) for d in (torch.float32, F64)]
     rng = np.random.default_rng(8)
     for _ in range(100):
@@ -330,7 +343,7 @@ def test_float32_agrees_with_float64():
 
 
 def test_bad_arguments_are_clear_errors():
-    p = PoseCellParams(pc_dim_xy=7, pc_dim_th=8)
+    p = _params(pc_dim_xy=7, pc_dim_th=8)
     with pytest.raises(ConfigError, match="method"):
         PoseCellNetwork(p, method="fft")
     with pytest.raises(ConfigError, match="batch_size"):
@@ -429,9 +442,7 @@ def scripted_views(n: int, seed: int):
 
 
 def test_module_follows_the_reference_bookkeeping_and_action_rule():
-    p = PoseCellParams(
-        pc_dim_xy=15, pc_dim_th=36, exp_delta_pc_threshold=2.0, pc_vt_inject_energy=0.3
-    )
+    p = _params(pc_dim_xy=15, pc_dim_th=36, exp_delta_pc_threshold=2.0, pc_vt_inject_energy=0.3)
     pc = PoseCells(p, dtype=F64)
     ref = ReferenceRule(p)
     got_inj = []
@@ -456,7 +467,7 @@ def test_module_follows_the_reference_bookkeeping_and_action_rule():
 
 
 def test_first_steps_and_recent_templates():
-    p = PoseCellParams(pc_dim_xy=11)
+    p = _params(pc_dim_xy=11)
     pc = PoseCells(p, dtype=F64)
     assert pc.on_odometry(0.1, 0.0, 1.0).kind == ActionKind.NONE  # no template yet
     pc.on_view_template(ViewMatch(0, is_new=True))
@@ -473,7 +484,7 @@ def test_first_steps_and_recent_templates():
 
 @pytest.mark.parametrize(("xy", "method"), [(15, "auto"), (41, "crop")])
 def test_state_round_trip_continues_bit_identically(xy, method):
-    p = PoseCellParams(pc_dim_xy=xy, pc_dim_th=36, pc_vt_inject_energy=0.3)
+    p = _params(pc_dim_xy=xy, pc_dim_th=36, pc_vt_inject_energy=0.3)
     stream = list(scripted_views(120, seed=10))
     a = PoseCells(p, method=method)
     for _t, m, (v, w) in stream[:70]:
@@ -498,7 +509,7 @@ def test_state_round_trip_continues_bit_identically(xy, method):
 
 
 def test_state_without_activity_restarts_the_packet_at_the_current_experience():
-    p = PoseCellParams(pc_dim_xy=11)
+    p = _params(pc_dim_xy=11)
     pc = PoseCells(p)
     state = {
         "template_pc": np.array([[1.0, 2.0, 3.0], [7.2, 8.9, 30.5]]),
@@ -514,14 +525,14 @@ def test_state_without_activity_restarts_the_packet_at_the_current_experience():
 
 
 def test_auto_method_crops_only_large_networks():
-    assert PoseCellNetwork(PoseCellParams(pc_dim_xy=11)).method == "separable"
-    assert PoseCellNetwork(PoseCellParams(pc_dim_xy=21)).method == "separable"
-    assert PoseCellNetwork(PoseCellParams(pc_dim_xy=80)).method == "crop"
-    assert PoseCellNetwork(PoseCellParams(pc_dim_xy=21), 32).method == "crop"
+    assert PoseCellNetwork(_params(pc_dim_xy=11)).method == "separable"
+    assert PoseCellNetwork(_params(pc_dim_xy=21)).method == "separable"
+    assert PoseCellNetwork(_params(pc_dim_xy=80)).method == "crop"
+    assert PoseCellNetwork(_params(pc_dim_xy=21), 32).method == "crop"
 
 
 def test_crop_notices_activity_written_from_outside():
-    p = PoseCellParams(pc_dim_xy=41, pc_dim_th=36)
+    p = _params(pc_dim_xy=41, pc_dim_th=36)
     nets = [packet_net(p, (20, 20, 18), method=m, settle=6) for m in ("crop", "separable")]
     for net in nets:
         with torch.no_grad():
@@ -560,7 +571,7 @@ def _brute_centre(act: np.ndarray, c: int) -> tuple[float, float, float]:
 @pytest.mark.parametrize("seed", range(3))
 def test_decoded_centre_equals_brute_force_population_vector_across_the_wrap(seed):
     rng = np.random.default_rng(seed)
-    params = PoseCellParams(pc_dim_xy=11, pc_dim_th=12)
+    params = _params(pc_dim_xy=11, pc_dim_th=12)
     net = PoseCellNetwork(params, 2, dtype=torch.float64)
     acts = rng.random((2, 12, 11, 11)) * 0.1
     acts[0, 0, 10, 0] = 5.0  # peak on the corner: the cube wraps on every axis
@@ -573,3 +584,93 @@ def test_decoded_centre_equals_brute_force_population_vector_across_the_wrap(see
             [11.0, 11.0, 12.0]
         ) - np.array([5.5, 5.5, 6.0])
         assert np.abs(diff).max() < 1e-9
+
+
+# ------------------------------------------------------- torch module behaviour
+@pytest.mark.parametrize("method", ["numpy", "crop", "separable"])
+@pytest.mark.parametrize("profile", ["openratslam", "project"])
+def test_double_float_and_to_move_the_caches_with_the_activity(method, profile):
+    p = PoseCellParams() if profile == "openratslam" else _params()
+    net = PoseCellNetwork(p, dtype=torch.float32, method=method)
+    ref = PoseCellNetwork(p, dtype=F64, method=method)
+    for n in (net, ref):
+        n.step(0.4, 0.1, 1.0)  # builds the float32 matrices and scratch buffers
+    net.double()
+    ref_c = ref.step(0.3, -0.2, 1.0)
+    c = net.step(0.3, -0.2, 1.0)
+    assert net.activity.dtype == F64 and net.best.dtype == F64
+    np.testing.assert_allclose(c.numpy(), ref_c.numpy(), atol=1e-5)
+    net.float()
+    assert net.activity.dtype == torch.float32 and net.best.dtype == F64
+    net.step(0.2, 0.0, 1.0)
+    net.to(torch.float64)
+    net.inject(3, 4, 5, 0.1)
+    net.step(0.2, 0.3, 1.0)
+    assert net.activity.dtype == F64
+    assert torch.isfinite(net.activity).all() and float(net.activity.sum()) > 0.9
+
+
+@pytest.mark.parametrize("method", ["numpy", "crop"])
+def test_state_dict_round_trips_activity_and_centre(method):
+    p = PoseCellParams()
+    a = PoseCellNetwork(p, dtype=F64, method=method)
+    for t in range(12):
+        if t == 5:
+            a.inject(2, 3, 30, 0.2)
+        a.step(0.7, 0.15, 1.0)
+    state = a.state_dict()
+    assert set(state) == {"activity", "best"}
+    b = PoseCellNetwork(p, dtype=F64, method=method)
+    b.load_state_dict(state)
+    assert torch.equal(b.centre(), a.centre())  # before any step: the saved centre
+    for _ in range(5):
+        ca, cb = a.step(-0.5, 0.3, 1.0), b.step(-0.5, 0.3, 1.0)
+        assert torch.equal(ca, cb)
+        assert torch.equal(a.activity, b.activity)
+
+
+@pytest.mark.parametrize("profile", ["openratslam", "project"])
+def test_numpy_step_equals_the_batched_torch_step(profile):
+    """One network in numpy and the same inputs as rows of a torch batch: the same
+    activity (rounding) and centres, with injections and moves across the wraps."""
+    p = PoseCellParams(pc_dim_xy=15) if profile == "openratslam" else _params(pc_dim_xy=15)
+    rng = np.random.default_rng(11)
+    b = 3
+    batch = PoseCellNetwork(p, b, dtype=F64)
+    singles = [PoseCellNetwork(p, dtype=F64, method="numpy") for _ in range(b)]
+    for t in range(60):
+        v = rng.uniform(-1.0, 1.0, b) * (2.5 if profile == "project" else 1.0)
+        w = rng.uniform(-1.2, 1.2, b)
+        if t % 9 == 4:
+            cells = rng.integers(0, 15, (3, b))
+            batch.inject(cells[0], cells[1], cells[2] % 36, 0.3)
+            for i, n in enumerate(singles):
+                n.inject(int(cells[0, i]), int(cells[1, i]), int(cells[2, i] % 36), 0.3)
+        cb = batch.step(v, w, 1.0)
+        for i, n in enumerate(singles):
+            ci = n.step(float(v[i]), float(w[i]), 1.0)
+            np.testing.assert_allclose(ci[0].numpy(), cb[i].numpy(), rtol=0, atol=1e-9)
+            np.testing.assert_allclose(
+                n.activity[0].numpy(), batch.activity[i].numpy(), rtol=0, atol=1e-12
+            )
+
+
+@pytest.mark.skipif(not torch.cuda.is_available(), reason="needs a CUDA device")
+@pytest.mark.parametrize("profile", ["openratslam", "project"])
+def test_to_cuda_steps_like_the_cpu_and_loads_back(profile):
+    p = PoseCellParams() if profile == "openratslam" else _params()
+    cpu = PoseCellNetwork(p, dtype=F64)
+    gpu = PoseCellNetwork(p, dtype=F64)
+    for n in (cpu, gpu):
+        n.step(0.5, 0.1, 1.0)
+    gpu.to("cuda")
+    assert gpu.activity.is_cuda and gpu.best.is_cuda and gpu.best.dtype == F64
+    for t in range(30):
+        for n in (cpu, gpu):
+            if t == 10:
+                n.inject(3, 17, 4, 0.3)
+            c = n.step(0.8, -0.3, 1.0)
+        np.testing.assert_allclose(c.cpu().numpy(), cpu.centre().numpy(), rtol=0, atol=1e-9)
+    back = PoseCellNetwork(p, dtype=F64)
+    back.load_state_dict({k: v.cpu() for k, v in gpu.state_dict().items()})
+    np.testing.assert_allclose(back.centre().numpy(), cpu.centre().numpy(), atol=1e-9)

@@ -1,0 +1,102 @@
+"""What each behaviour switch changes, measured against OpenRatSLAM's golden traces.
+
+usage: python -m benchmarks.switch_effects [NAME ...]   (default: every trace set)
+
+For each trace set of ``tests/data/openratslam`` (the frames re-rendered by the
+simulator, the odometry the C++ read), torchratslam runs in float64 with the
+"openratslam" profile, then with each switch of :data:`torchratslam.config.PROFILES`
+flipped alone to the "torchratslam" value, then with the "torchratslam" profile. Columns:
+frames whose action differs from the C++'s, the first such frame, experiences and links,
+ATE over frames >= 1 (m; the final pose of each frame's experience against the
+simulator's ground truth, rigid alignment), and the largest distance between the final
+map and the C++'s when every action agrees. No C++ build is needed (the traces hold its
+output). docs/openratslam-fidelity.md quotes this table.
+"""
+
+from __future__ import annotations
+
+import sys
+
+import numpy as np
+
+
+def _rows() -> list[tuple[str, dict]]:
+    from torchratslam.config import PROFILES
+
+    own = PROFILES["torchratslam"]
+    rows: list[tuple[str, dict]] = [("openratslam profile", {"behaviour": "openratslam"})]
+    for key, value in own.items():
+        change = {"behaviour": "openratslam", key: value}
+        label = f"{key}={value}"
+        if key == "pc_multi_cell":  # only defined with the mass-preserving wrap
+            change["pc_wrap"] = "preserve_mass"
+            label += " (+ pc_wrap=preserve_mass)"
+        rows.append((label, change))
+    rows.append(("torchratslam profile", {"behaviour": "torchratslam"}))
+    return rows
+
+
+def effects(name: str) -> list[dict]:
+    """One dict per row of :func:`_rows` for trace set ``name``."""
+    import torch
+
+    sys.path.insert(0, "tests/torchratslam")
+    import test_openratslam_traces as T  # the traces' loaders (frames re-rendered)
+
+    from torchratslam.config import load_config
+    from torchratslam.eval.metrics import ate_rmse
+    from torchratslam.pipeline import RatSLAM
+    from torchratslam.sim import open_sim
+
+    torch.set_num_threads(1)
+    tr = T.trace(name)
+    f = tr["f"]
+    frames = T.frames(name)
+    gt = np.asarray(open_sim(tr["meta"]["spec"]).poses)[: len(frames), :2]
+    cpp = tr["exps"][:, 1:3]
+    out = []
+    for label, change in _rows():
+        slam = RatSLAM(load_config(tr["config"], **change), dtype=torch.float64)
+        steps: list = []
+        slam.run(frames, progress=False, callback=steps.append)
+        acts = np.array([int(r.action.kind) for r in steps])
+        diff = np.nonzero(acts != f["action"])[0]
+        traj = slam.trajectory()
+        ok = np.isfinite(traj[:, 3]) & (traj[:, 0] >= 1)
+        poses = np.asarray(slam.experience_map.poses)
+        same = diff.size == 0 and len(poses) == len(cpp)
+        out.append(
+            {
+                "row": label,
+                "actions_differing": int(diff.size),
+                "first": int(diff[0]) if diff.size else None,
+                "experiences": len(poses),
+                "links": int(slam.experience_map.num_links),
+                "ate": float(ate_rmse(traj[ok, 3:5], gt[traj[ok, 0].astype(int)])),
+                "max_dxy": float(np.hypot(*(poses[:, :2] - cpp).T).max()) if same else None,
+            }
+        )
+    return out
+
+
+def main() -> None:
+    names = sys.argv[1:] or ["loop", "turns", "templates"]
+    for name in names:
+        print(f"### {name}\n")
+        print(
+            "| run (float64) | actions differing (first) | experiences / links | ATE m | "
+            "max distance to the C++ map m |"
+        )
+        print("|---|---|---|---|---|")
+        for r in effects(name):
+            first = f" ({r['first']})" if r["first"] is not None else ""
+            dxy = f"{r['max_dxy']:.1e}" if r["max_dxy"] is not None else "-"
+            print(
+                f"| {r['row']} | {r['actions_differing']}{first} | {r['experiences']} / "
+                f"{r['links']} | {r['ate']:.3f} | {dxy} |"
+            )
+        print(flush=True)
+
+
+if __name__ == "__main__":
+    main()

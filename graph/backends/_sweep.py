@@ -1,0 +1,106 @@
+"""OpenRatSLAM's ``ExperienceMap::iterate`` loop compiled with numba (imported lazily).
+
+The arithmetic is the C++'s, operation for operation: ``clip_rad_180`` and
+``clip_rad_360`` as subtraction loops (kept here, not
+:func:`torchratslam.graph.geometry.wrap_angle`'s floor remainder, because the two differ
+in the last bit and the sweep must reproduce the C++ bit for bit),
+``get_signed_delta_rad`` with its two clips, the link as ``(d, heading, facing)``,
+poses updated in place link after link. Compiled
+functions are cached on disk by numba (``cache=True``); the first use in a fresh
+environment compiles them (about a second). Call it through
+:func:`torchratslam.graph.backends.alpha.sweep_openratslam`.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+PI = math.pi
+TWO_PI = 2.0 * math.pi
+
+
+@njit(cache=True, nogil=True)
+def clip_rad_180(a: float) -> float:  # pragma: no cover - compiled
+    """OpenRatSLAM's ``clip_rad_180``: to ``(-pi, pi]`` by whole turns."""
+    while a > PI:
+        a -= TWO_PI
+    while a <= -PI:
+        a += TWO_PI
+    return a
+
+
+@njit(cache=True, nogil=True)
+def clip_rad_360(a: float) -> float:  # pragma: no cover - compiled
+    """OpenRatSLAM's ``clip_rad_360``: to ``[0, 2 pi)`` by whole turns."""
+    while a < 0.0:
+        a += TWO_PI
+    while a >= TWO_PI:
+        a -= TWO_PI
+    return a
+
+
+@njit(cache=True, nogil=True)
+def get_signed_delta_rad(a1: float, a2: float) -> float:  # pragma: no cover - compiled
+    """OpenRatSLAM's ``get_signed_delta_rad`` (from ``a1`` to ``a2``)."""
+    direction = clip_rad_180(a2 - a1)
+    delta = abs(clip_rad_360(a1) - clip_rad_360(a2))
+    if delta < TWO_PI - delta:
+        return delta if direction > 0 else -delta
+    return TWO_PI - delta if direction > 0 else -(TWO_PI - delta)
+
+
+@njit(cache=True, nogil=True)
+def sweep(
+    pose: np.ndarray,
+    src: np.ndarray,
+    dst: np.ndarray,
+    link: np.ndarray,
+    passes: int,
+    c: float,
+) -> int:  # pragma: no cover - compiled
+    """``passes`` in-place passes over the links in the given order; returns passes run.
+
+    Stops after a pass that changed no value (every later pass would repeat it).
+
+    Shape:
+        pose: (N, 3); src, dst: (E,); link: (E, 3) ``[d, heading, facing]``.
+    """
+    ran = 0
+    for _ in range(passes):
+        ran += 1
+        changed = False
+        for k in range(src.shape[0]):
+            f = src[k]
+            t = dst[k]
+            xf = pose[f, 0]
+            yf = pose[f, 1]
+            thf = pose[f, 2]
+            xt = pose[t, 0]
+            yt = pose[t, 1]
+            tht = pose[t, 2]
+            d = link[k, 0]
+            lx = xf + d * math.cos(thf + link[k, 1])
+            ly = yf + d * math.sin(thf + link[k, 1])
+            ex = (xt - lx) * c
+            ey = (yt - ly) * c
+            nxf = xf + ex
+            nyf = yf + ey
+            nxt = xt - ex
+            nyt = yt - ey
+            df = get_signed_delta_rad(thf + link[k, 2], tht)
+            nthf = clip_rad_180(thf + df * c)
+            ntht = clip_rad_180(tht - df * c)
+            if nxf != xf or nyf != yf or nxt != xt or nyt != yt or nthf != thf or ntht != tht:
+                changed = True
+            pose[f, 0] = nxf
+            pose[f, 1] = nyf
+            pose[t, 0] = nxt
+            pose[t, 1] = nyt
+            pose[f, 2] = nthf
+            pose[t, 2] = ntht
+        if not changed:
+            break
+    return ran
