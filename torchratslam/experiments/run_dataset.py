@@ -341,7 +341,7 @@ def check_device(spec: str | None) -> Any:
 
 
 def _data_kind(spec: str) -> str:
-    """"sim", "bag" (ROS 1 or ROS 2, a file or a bag directory), "directory" or "video"."""
+    """The kind of data: sim, bag (ROS 1 or 2, a file or a bag directory), directory, video."""
     from torchratslam.readers.bags import is_bag
 
     if spec.startswith("sim:"):
