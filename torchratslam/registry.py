@@ -60,5 +60,11 @@ LOCAL_VIEWS = Registry("local view")
 POSE_CELLS = Registry("pose-cell module")
 EXPERIENCE_MAPS = Registry("experience map")
 ODOMETRY = Registry("odometry source")
+RANGE_MAPPERS = Registry("range-sensor mapper")
+"""Place recognition and mapping from laser scans (the alternative to local view + experience
+map for range sensors); ``"mbaram"`` is registered by :mod:`torchratslam.mbaram.model`.
+Factory: ``factory(params, *, odometry="groundtruth", dtype, device)``; the mapper has
+``learn(frame) -> int``, ``localise(frame, *, odometry=True) -> int`` (the node, -1 = none),
+``__len__`` and ``model``."""
 
 Factory = Callable[..., Any]

@@ -24,7 +24,12 @@ from torchratslam.messages import Frame
 # docs/mbaram.md (paper values plus units and the odometry channel's S_MAX,k)
 PRESETS: dict[str, dict[str, float]] = {
     "paper": {},
-    "sim": {"laser_scale": 3.0, "s_max_odometry": 3e-5, "var_floor_odometry": 0.01},
+    "sim": {
+        "laser_scale": 3.0,
+        "s_max_odometry": 3e-6,
+        "var_floor_odometry": 0.01,
+        "laser_outlier": 0.01,
+    },
 }
 
 # the paper's robot experiment (Section 3.4) and Rawseeds results, for the figures
@@ -77,6 +82,11 @@ def register(subparsers: Any) -> argparse.ArgumentParser:
         default=[],
         metavar="KEY=VALUE",
         help="an MBARAM parameter over the preset, e.g. --set laser_scale=5 (repeatable)",
+    )
+    p.add_argument(
+        "--mapper",
+        default="mbaram",
+        help="range-sensor mapper, a name in torchratslam.registry.RANGE_MAPPERS",
     )
     p.add_argument("--no-plots", action="store_true", help="skip the figures")
     p.set_defaults(func=main)
@@ -230,6 +240,7 @@ def main(args: argparse.Namespace) -> int:
         [laser_frames(session, a, b) for a, b in loc_r],
         params,
         odometry=args.odometry,
+        mapper=args.mapper,
     )
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
