@@ -112,12 +112,6 @@ class MBARAMParams(Params):
         30.0, "ranges are clipped to [0, laser_max_range] metres", gt=0.0
     )
     odo_scale: float = param(1.0, "position units per metre fed to the odometry channel", gt=0.0)
-    likelihood: str = param(
-        "joint",
-        "channel likelihood in Eq. 5: the joint density of all D_k dimensions (joint, paper) "
-        "or its per-dimension geometric mean, p^(1/D_k) (per_dim)",
-        choices=("joint", "per_dim"),
-    )
     laser_outlier: float = param(
         0.0,
         "laser channels: weight eps of a uniform outlier density on [0, laser_max_range] "
@@ -385,8 +379,6 @@ class MBARAM:
                 logp = torch.logaddexp(logn, torch.full_like(logn, log_u)).sum(-1)
             else:
                 logp = -0.5 * (ch.dim * _LOG_2PI + ch.logdet[:n] + q)  # Eq. 5
-            if self.params.likelihood == "per_dim":
-                logp = logp / ch.dim
             joint = logp + logprior
             logpost = joint - torch.logsumexp(joint, 0)  # Eqs. 1, 4
             if self.weights[k] > 0:
