@@ -24,46 +24,12 @@ import time
 
 import numpy as np
 import torch
-import torch.nn.functional as F
 
 from torchratslam.config import LocalViewParams
 from torchratslam.local_view.view import LocalView
+from torchratslam.sim.views import ViewRoute as Route
 
 CPP_MS = 4.25  # OpenRatSLAM, 1781-frame panoramic loop, 271 templates of 64x16
-
-
-def _smooth(x: torch.Tensor, sy: float, sx: float) -> torch.Tensor:
-    """Gaussian blur of ``(N, Y, X)``: circular along X, replicated along Y."""
-
-    def kernel(s: float) -> tuple[torch.Tensor, int]:
-        r = int(3 * s) + 1
-        g = torch.exp(-(torch.arange(-r, r + 1, dtype=x.dtype) ** 2) / (2 * s * s))
-        return g / g.sum(), r
-
-    gx, rx = kernel(sx)
-    gy, ry = kernel(sy)
-    n, y, w = x.shape
-    x = torch.cat([x[..., -rx:], x, x[..., :rx]], -1)
-    x = F.conv1d(x.reshape(-1, 1, x.shape[-1]), gx[None, None]).reshape(n, y, w)
-    x = F.pad(x.transpose(1, 2).reshape(-1, 1, y), (ry, ry), mode="replicate")
-    return F.conv1d(x, gy[None, None]).reshape(n, w, y).transpose(1, 2)
-
-
-class Route:
-    """Places along a route; ``views(p)`` renders the panoramas at positions ``p``."""
-
-    def __init__(self, length: float, y: int, x: int, *, knot: float = 4.0, seed: int = 0):
-        g = torch.Generator().manual_seed(seed)
-        self.knot = knot
-        base = _smooth(torch.randn(int(length / knot) + 3, y, x, generator=g), y / 8, x / 32)
-        self.base = base / base.std() * 0.15
-        self.grad = torch.linspace(0.75, 0.3, y)[:, None]
-
-    def views(self, p: torch.Tensor) -> torch.Tensor:
-        p = torch.as_tensor(p, dtype=torch.float32)
-        j = (p / self.knot).floor().long()
-        a = (p / self.knot - j)[:, None, None]
-        return ((1 - a) * self.base[j] + a * self.base[j + 1] + self.grad).clamp(0, 1)
 
 
 def _frames(route: Route, n: int, m: int, panoramic: bool, seed: int = 1):

@@ -20,7 +20,8 @@ graph's node poses are refreshed lazily when :attr:`ExperienceMap.graph` is read
 
 Example:
     >>> from torchratslam.graph.experience_map import ExperienceMap
-    >>> from torchratslam.graph.messages import Action, ActionKind
+    >>> from torchratslam.graph.geometry import inverse, signed_delta, wrap_angle
+from torchratslam.graph.messages import Action, ActionKind
     >>> from torchratslam.graph.params import ExperienceMapParams
     >>> em = ExperienceMap(ExperienceMapParams(exp_initial_em_deg=0.0))
     >>> em.apply(Action(ActionKind.CREATE, dest_id=0))
@@ -35,7 +36,7 @@ from __future__ import annotations
 import itertools
 import logging
 import math
-from typing import Any, Protocol
+from typing import Any
 
 import networkx as nx
 import numpy as np
@@ -44,17 +45,16 @@ from torchratslam.graph.features import (
     Route,
     average_transition,
     experience_activity,
-    invert_transition,
     link_confidence,
     peak_experience,
     rotate_link_components,
-    signed_delta_rad,
     temporal_map,
-    wrap_rad,
 )
+from torchratslam.graph.geometry import inverse, signed_delta, wrap_angle
 from torchratslam.graph.messages import Action, ActionKind
 from torchratslam.graph.params import ExperienceMapParams
 from torchratslam.graph.posegraph import PoseGraph
+from torchratslam.graph.protocols import RelaxationBackend
 
 __all__ = ["ExperienceMap", "Route"]
 
@@ -62,15 +62,6 @@ log = logging.getLogger(__name__)
 
 STATE_FORMAT = "torchratslam.graph.experience_map"
 STATE_VERSION = 1
-
-
-class RelaxationBackend(Protocol):
-    """What :meth:`ExperienceMap.iterate` needs from a backend.
-
-    See ``torchratslam.graph.backends``.
-    """
-
-    def relax(self, pg: PoseGraph, *, passes: int, correction: float = 0.5) -> np.ndarray: ...
 
 
 def _grow(a: np.ndarray, need: int) -> np.ndarray:
@@ -232,7 +223,7 @@ class ExperienceMap:
         Returns:
             The new experience id (= its row).
         """
-        pose = np.array([x, y, wrap_rad(th)], dtype=np.float64)
+        pose = np.array([x, y, wrap_angle(th, include_pi=True)], dtype=np.float64)
         pcv = np.asarray(pc, dtype=np.float64).reshape(-1)
         if pcv.shape != (3,) or not (np.all(np.isfinite(pose)) and np.all(np.isfinite(pcv))):
             raise InputError(
@@ -340,7 +331,11 @@ class ExperienceMap:
         self._src[k] = src
         self._dst[k] = dst
         self._set_link_values(
-            k, float(d), float(wrap_rad(heading)), float(wrap_rad(facing)), float(dt)
+            k,
+            float(d),
+            float(wrap_angle(heading, include_pi=True)),
+            float(wrap_angle(facing, include_pi=True)),
+            float(dt),
         )
         self._counts[k] = counts
         self._behaviour[k] = int(behaviour)
@@ -376,7 +371,7 @@ class ExperienceMap:
             dt: interval (s).
         """
         step = vtrans * dt
-        self.accum_facing = float(wrap_rad(self.accum_facing + vrot * dt))
+        self.accum_facing = wrap_angle(self.accum_facing + vrot * dt, include_pi=True)
         self.accum_x += step * math.cos(self.accum_facing)
         self.accum_y += step * math.sin(self.accum_facing)
         self.accum_time += dt
@@ -385,8 +380,10 @@ class ExperienceMap:
         """The accumulated transition as a link of ``src``: ``(d, heading, facing)``."""
         th = float(self._pose[src, 2])
         d = math.hypot(self.accum_x, self.accum_y)
-        heading = signed_delta_rad(th, math.atan2(self.accum_y, self.accum_x))
-        facing = signed_delta_rad(th, wrap_rad(self.accum_facing + relative_rad))
+        heading = signed_delta(th, math.atan2(self.accum_y, self.accum_x), include_pi=True)
+        facing = signed_delta(
+            th, wrap_angle(self.accum_facing + relative_rad, include_pi=True), include_pi=True
+        )
         return d, float(heading), float(facing)
 
     # --------------------------------------------------------------- actions
@@ -453,7 +450,7 @@ class ExperienceMap:
         new = self.add_experience(
             x,
             y,
-            float(wrap_rad(self.accum_facing)),
+            wrap_angle(self.accum_facing, include_pi=True),
             pc=pc,
             template_id=template_id,
             frame=frame,
@@ -514,7 +511,7 @@ class ExperienceMap:
         self.current_id = dest
         self.accum_x = 0.0
         self.accum_y = 0.0
-        self.accum_facing = float(wrap_rad(float(self._pose[dest, 2]) + relative_rad))
+        self.accum_facing = wrap_angle(float(self._pose[dest, 2]) + relative_rad, include_pi=True)
         self.relative_rad = float(relative_rad)
 
     def _repeat_or_count(self, cur: int, dest: int, relative_rad: float, behaviour: int) -> None:
@@ -529,7 +526,7 @@ class ExperienceMap:
         d, heading, facing = self._measurement(cur, relative_rad)
         meas = np.array([d * math.cos(heading), d * math.sin(heading), facing])
         if int(self._src[k]) != cur:  # the link runs the other way: express it from its source
-            meas = invert_transition(meas)
+            meas = inverse(meas, include_pi=True)
         new = average_transition(self._meas[k], meas)
         dt = 0.5 * (float(self._link[k, 3]) + self.accum_time)
         self._set_link_values(
@@ -635,7 +632,7 @@ class ExperienceMap:
                 f"(expected ({self._n}, 3), finite); check the backend"
             )
         self._pose[: self._n, :2] = new[:, :2]
-        self._pose[: self._n, 2] = wrap_rad(new[:, 2])
+        self._pose[: self._n, 2] = wrap_angle(new[:, 2], include_pi=True)
         self._poses_dirty = True
         self._version += 1
         if getattr(backend, "last_converged", False):

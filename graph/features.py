@@ -14,7 +14,8 @@ an Overloaded Rat Brain" (IROS 2006), ``shared/papers/experience-map.txt``:
 Transitions are written ``[dx, dy, dth]`` everywhere in this project (the pose of the
 target in the source's frame, as in :class:`torchratslam.graph.posegraph.PoseGraph`); the paper
 writes the same vector as ``(dth, dx, dy)``. Angles are wrapped to ``(-pi, pi]`` as
-OpenRatSLAM's ``clip_rad_180`` does. Everything here is numpy only (no torch).
+OpenRatSLAM's ``clip_rad_180`` does (``geometry.wrap_angle(..., include_pi=True)``).
+Everything here is numpy only (no torch).
 """
 
 from __future__ import annotations
@@ -23,58 +24,17 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from torchratslam.graph.errors import InputError
-
-TWO_PI = 2.0 * np.pi
+from torchratslam.graph.geometry import ring_distance, signed_delta, wrap_angle
 
 __all__ = [
     "Route",
     "average_transition",
     "experience_activity",
-    "invert_transition",
     "link_confidence",
     "peak_experience",
-    "ring_distance",
     "rotate_link_components",
-    "signed_delta_rad",
     "temporal_map",
-    "wrap_rad",
 ]
-
-
-def wrap_rad(a: np.ndarray | float) -> np.ndarray | float:
-    """Wrap angles to ``(-pi, pi]`` (OpenRatSLAM's ``clip_rad_180``).
-
-    Args:
-        a: angles in radians, any shape.
-
-    Returns:
-        The wrapped angles; a Python float for a scalar input.
-    """
-    x = np.asarray(a, dtype=np.float64)
-    out = np.pi - np.remainder(np.pi - x, TWO_PI)
-    return float(out) if out.ndim == 0 else out
-
-
-def signed_delta_rad(a: np.ndarray | float, b: np.ndarray | float) -> np.ndarray | float:
-    """Signed smallest rotation from ``a`` to ``b`` (OpenRatSLAM's ``get_signed_delta_rad``).
-
-    Returns:
-        ``b - a`` wrapped to ``(-pi, pi]``.
-    """
-    return wrap_rad(np.asarray(b, dtype=np.float64) - np.asarray(a, dtype=np.float64))
-
-
-def ring_distance(a: np.ndarray, b: np.ndarray, size: float | None) -> np.ndarray:
-    """Absolute difference of coordinates on a ring of ``size`` cells (plain if None).
-
-    Shape:
-        a, b: broadcastable arrays. Returns their broadcast shape.
-    """
-    d = np.abs(np.asarray(a, dtype=np.float64) - np.asarray(b, dtype=np.float64))
-    if size is None:
-        return d
-    d = np.remainder(d, size)
-    return np.minimum(d, size - d)
 
 
 def experience_activity(
@@ -166,14 +126,16 @@ def average_transition(old: np.ndarray, current: np.ndarray) -> np.ndarray:
     d_cur = np.hypot(cur[..., 0], cur[..., 1])
     b_old = np.arctan2(old[..., 1], old[..., 0])
     b_cur = np.arctan2(cur[..., 1], cur[..., 0])
-    half = 0.5 * signed_delta_rad(b_old, b_cur)
+    half = 0.5 * signed_delta(b_old, b_cur, include_pi=True)
     zero = d_old == 0.0
     d_s = np.where(zero, 0.0, (d_cur + d_old) / (2.0 * np.where(zero, 1.0, d_old)))
     c, s = np.cos(half), np.sin(half)
     out = np.empty(old.shape, dtype=np.float64)
     out[..., 0] = np.where(zero, 0.5 * cur[..., 0], d_s * (c * old[..., 0] - s * old[..., 1]))
     out[..., 1] = np.where(zero, 0.5 * cur[..., 1], d_s * (s * old[..., 0] + c * old[..., 1]))
-    out[..., 2] = wrap_rad(old[..., 2] + 0.5 * signed_delta_rad(old[..., 2], cur[..., 2]))
+    out[..., 2] = wrap_angle(
+        old[..., 2] + 0.5 * signed_delta(old[..., 2], cur[..., 2], include_pi=True), include_pi=True
+    )
     return out
 
 
@@ -196,21 +158,6 @@ def rotate_link_components(components: np.ndarray, dtheta: np.ndarray | float) -
     out = np.array(comp, dtype=np.float64, copy=True)
     out[..., 0] = c * comp[..., 0] - s * comp[..., 1]
     out[..., 1] = s * comp[..., 0] + c * comp[..., 1]
-    return out
-
-
-def invert_transition(t: np.ndarray) -> np.ndarray:
-    """The reverse transition: the source's pose in the target's frame.
-
-    Shape:
-        t: (..., 3) ``[dx, dy, dth]``. Returns (..., 3).
-    """
-    t = np.asarray(t, dtype=np.float64)
-    c, s = np.cos(t[..., 2]), np.sin(t[..., 2])
-    out = np.empty(t.shape, dtype=np.float64)
-    out[..., 0] = -(c * t[..., 0] + s * t[..., 1])
-    out[..., 1] = -(-s * t[..., 0] + c * t[..., 1])
-    out[..., 2] = wrap_rad(-t[..., 2])
     return out
 
 

@@ -5,9 +5,9 @@ indices ``(from, to)`` and, per edge, the measured pose of ``to`` in ``from``'s 
 ``[dx, dy, dth]`` (a ``Pose2`` "between"). A RatSLAM link ``(d, heading, facing)`` is
 ``dx = d cos(heading)``, ``dy = d sin(heading)``, ``dth = facing``.
 
-Also here: angle helpers, SE(2) composition in numpy, odometry composition (the initial
-estimate of a graph read from a file without vertices) and a union-find used to anchor
-every connected component of a graph.
+Also here: odometry composition (the initial estimate of a graph read from a file
+without vertices, through :func:`torchratslam.graph.geometry.chain_poses`) and a
+union-find used to anchor every connected component of a graph.
 """
 
 from __future__ import annotations
@@ -17,51 +17,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from torchratslam.graph.errors import InputError
-
-TWO_PI = 2.0 * np.pi
-
-
-def wrap_angle(a: np.ndarray | float) -> np.ndarray | float:
-    """Wrap angles to ``[-pi, pi)``.
-
-    Args:
-        a: angles in radians (any shape).
-    """
-    out = np.remainder(np.asarray(a, dtype=np.float64) + np.pi, TWO_PI) - np.pi
-    return float(out) if out.ndim == 0 else out
-
-
-def signed_delta(a: np.ndarray | float, b: np.ndarray | float) -> np.ndarray | float:
-    """Signed smallest rotation from ``a`` to ``b`` (``b - a`` wrapped to ``[-pi, pi)``)."""
-    return wrap_angle(np.asarray(b, dtype=np.float64) - np.asarray(a, dtype=np.float64))
-
-
-def compose(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """SE(2) composition ``a * b`` (pose ``b`` given in ``a``'s frame, to world).
-
-    Shape:
-        a, b: (..., 3) ``[x, y, th]``, broadcastable. Returns (..., 3).
-    """
-    a = np.asarray(a, dtype=np.float64)
-    b = np.asarray(b, dtype=np.float64)
-    c, s = np.cos(a[..., 2]), np.sin(a[..., 2])
-    x = a[..., 0] + c * b[..., 0] - s * b[..., 1]
-    y = a[..., 1] + s * b[..., 0] + c * b[..., 1]
-    return np.stack([x, y, wrap_angle(a[..., 2] + b[..., 2])], axis=-1)
-
-
-def between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """SE(2) relative pose ``a^-1 * b`` (``b`` expressed in ``a``'s frame).
-
-    Shape:
-        a, b: (..., 3) ``[x, y, th]``, broadcastable. Returns (..., 3).
-    """
-    a = np.asarray(a, dtype=np.float64)
-    b = np.asarray(b, dtype=np.float64)
-    c, s = np.cos(a[..., 2]), np.sin(a[..., 2])
-    dx = b[..., 0] - a[..., 0]
-    dy = b[..., 1] - a[..., 1]
-    return np.stack([c * dx + s * dy, -s * dx + c * dy, wrap_angle(b[..., 2] - a[..., 2])], axis=-1)
+from torchratslam.graph.geometry import between, chain_poses, wrap_angle
 
 
 class UnionFind:
@@ -269,16 +225,4 @@ def compose_odometry(
             f"cannot compose odometry: no edge between nodes {missing - 1} and {missing}; "
             "give initial poses (VERTEX lines) instead"
         )
-    poses = np.empty((num_poses, 3))
-    if num_poses == 0:
-        return poses
-    poses[0] = start
-    # sequential composition: angles by cumulative sum, positions by rotated cumsum
-    th = np.asarray(wrap_angle(np.cumsum(np.concatenate([[start[2]], step[1:, 2]]))))
-    c, s = np.cos(th[:-1]), np.sin(th[:-1])
-    dx = c * step[1:, 0] - s * step[1:, 1]
-    dy = s * step[1:, 0] + c * step[1:, 1]
-    poses[:, 0] = start[0] + np.concatenate([[0.0], np.cumsum(dx)])
-    poses[:, 1] = start[1] + np.concatenate([[0.0], np.cumsum(dy)])
-    poses[:, 2] = th
-    return poses
+    return chain_poses(step, start)

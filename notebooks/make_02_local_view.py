@@ -15,30 +15,28 @@ averaging, optional normalisation) and compares it, by mean absolute difference 
 at every column offset, with every stored template. Below the threshold the view is
 *familiar* (template id, offset, relative angle); above it a new template is learnt.
 
-The frames here are synthetic 256x64 panoramas along a route (the generator of
-`benchmarks/bench_local_view.py`), so the notebook runs without a dataset.""",
+The frames here are synthetic 256x64 panoramas along a route
+(`torchratslam.sim.views.ViewRoute`, also used by `benchmarks/bench_local_view.py`), so
+the notebook runs without a dataset.""",
     ),
     (
         "code",
         """import os
-import sys
 from pathlib import Path
 
 import matplotlib.pyplot as plt
 import numpy as np
 import torch
 
-ROOT = Path.cwd().resolve().parent
-sys.path.insert(0, str(ROOT))
-from benchmarks.bench_local_view import Route
 from torchratslam.config import LocalViewParams
 from torchratslam.local_view.view import LocalView
+from torchratslam.sim.views import ViewRoute
 
 params = LocalViewParams(
     template_x_size=64, template_y_size=16, vt_panoramic=True, vt_step_match=1,
     vt_match_threshold=0.03,
 )
-route = Route(60.0, 16, 64, seed=3)
+route = ViewRoute(60.0, 16, 64, seed=3)
 
 
 def image_at(position, turn=0, noise=0.005, seed=0):

@@ -67,8 +67,8 @@ def test_the_contracts_name_every_part_of_the_package():
     assert set(library["source_modules"]) == parts - APPS
     assert set(library["forbidden_modules"]) == APPS - {"torchratslam.__main__"}
     shared = set(CONTRACTS["shared"]["source_modules"])
-    assert shared == {f"torchratslam.{m}" for m in ("config", "errors", "messages", "registry",
-                                                    "timing")}  # fmt: skip
+    assert shared == {f"torchratslam.{m}" for m in ("config", "errors", "messages", "protocols",
+                                                    "registry", "timing")}  # fmt: skip
     stages = CONTRACTS["stages"]["layers"]
     assert stages.index("torchratslam.readers") < stages.index("torchratslam.local_view")
     assert stages.index("torchratslam.pose_cells") < stages.index(

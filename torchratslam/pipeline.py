@@ -45,7 +45,7 @@ import logging
 import queue
 import threading
 import time
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator, Sized
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -53,9 +53,10 @@ import numpy as np
 import torch
 
 from torchratslam.config import RatSLAMConfig, VisualOdometryParams
-from torchratslam.graph.errors import ConfigError, InputError
+from torchratslam.graph.errors import InputError
 from torchratslam.graph.messages import Action
 from torchratslam.messages import Frame, ViewMatch
+from torchratslam.protocols import FrameSource
 from torchratslam.readers.visual_odometry import GivenOdometry, VisualOdometry
 from torchratslam.registry import EXPERIENCE_MAPS, LOCAL_VIEWS, ODOMETRY, POSE_CELLS, Registry
 from torchratslam.timing import TimeLogger
@@ -104,15 +105,7 @@ def _load_default_modules() -> None:
 
 
 def _build(registry: Registry, spec: Any, *args: Any, **kwargs: Any) -> Any:
-    if isinstance(spec, str):
-        return registry.get(spec)(*args, **kwargs)
-    if isinstance(spec, type):
-        return spec(*args, **kwargs)
-    if spec is None:
-        raise ConfigError(
-            f"no {registry.kind} given: pass a registered name ({', '.join(registry.names())})"
-        )
-    return spec  # an instance
+    return registry.build(spec, *args, **kwargs)
 
 
 def _centre(pose_cells: Any) -> tuple[float, float, float]:
@@ -424,20 +417,18 @@ class RatSLAM:
         Returns:
             :class:`RunResult`.
         """
-        if hasattr(frames, "frames") and callable(frames.frames):
-            total = len(frames) if hasattr(frames, "__len__") else None  # type: ignore[arg-type]
-            it: Iterator[Frame] = iter(frames.frames())
-            if not getattr(frames, "has_odometry", True) and isinstance(
-                self.odometry, GivenOdometry
-            ):
-                log.warning(
-                    "%s carries no odometry but the odometry source is 'given' (zero "
-                    "motion); build RatSLAM(..., odometry='visual') to estimate it",
-                    getattr(frames, "name", "the data"),
-                )
-        else:
-            total = len(frames) if hasattr(frames, "__len__") else None  # type: ignore[arg-type]
-            it = iter(frames)
+        total = len(frames) if isinstance(frames, Sized) else None
+        it: Iterator[Frame] = iter(frames.frames() if isinstance(frames, FrameSource) else frames)
+        if (
+            isinstance(frames, FrameSource)
+            and not getattr(frames, "has_odometry", True)
+            and isinstance(self.odometry, GivenOdometry)
+        ):
+            log.warning(
+                "%s carries no odometry but the odometry source is 'given' (zero "
+                "motion); build RatSLAM(..., odometry='visual') to estimate it",
+                getattr(frames, "name", "the data"),
+            )
         if max_frames is not None:
             if max_frames < 0:
                 raise InputError(f"max_frames must be >= 0, got {max_frames}")

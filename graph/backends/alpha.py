@@ -45,7 +45,8 @@ import math
 
 import numpy as np
 from torchratslam.graph.errors import ConfigError
-from torchratslam.graph.posegraph import TWO_PI, PoseGraph
+from torchratslam.graph.geometry import TWO_PI, wrap_angle
+from torchratslam.graph.posegraph import PoseGraph
 
 
 def _check(passes: int, correction: float) -> None:
@@ -53,10 +54,6 @@ def _check(passes: int, correction: float) -> None:
         raise ConfigError(f"passes must be a non-negative integer, got {passes!r}")
     if not 0.0 < correction <= 1.0:
         raise ConfigError(f"correction (exp_correction) must be in (0, 1], got {correction!r}")
-
-
-def _wrap(a: float) -> float:
-    return (a + math.pi) % TWO_PI - math.pi
 
 
 def reference_order(edges: np.ndarray) -> np.ndarray:
@@ -99,9 +96,9 @@ class AlphaReferenceBackend:
                 y[f] += ey * c
                 x[t] -= ex * c
                 y[t] -= ey * c
-                df = _wrap(th[t] - (th[f] + facing))
-                th[f] = _wrap(th[f] + df * c)
-                th[t] = _wrap(th[t] - df * c)
+                df = wrap_angle(th[t] - (th[f] + facing))
+                th[f] = wrap_angle(th[f] + df * c)
+                th[t] = wrap_angle(th[t] - df * c)
         return np.stack([np.array(x), np.array(y), np.array(th)], axis=1)
 
     def reset(self) -> None:
@@ -316,13 +313,13 @@ class AlphaBackend:
                 self.last_passes = 1
                 break
         self.last_converged = self.last_passes < passes
-        return np.stack([z.real, z.imag, np.remainder(th + pi, two_pi) - pi], axis=1)
+        return np.stack([z.real, z.imag, wrap_angle(th)], axis=1)
 
 
 def _moved(z: np.ndarray, z0: np.ndarray, dth: np.ndarray) -> float:
     """Largest change of x, y or (wrapped) th between two states."""
     dz = z - z0
-    dth = np.remainder(dth + math.pi, TWO_PI) - math.pi
+    dth = wrap_angle(dth)
     return float(max(np.abs(dz.real).max(), np.abs(dz.imag).max(), np.abs(dth).max()))
 
 
@@ -347,6 +344,7 @@ def _relax_scalar(
             y[f] += ey
             x[t] -= ex
             y[t] -= ey
+            # geometry.wrap_angle's [-pi, pi) arithmetic, inlined on this hot path
             df = ((th[t] - th[f] - mth + pi) % TWO_PI - pi) * c
             th[f] = (th[f] + df + pi) % TWO_PI - pi
             th[t] = (th[t] - df + pi) % TWO_PI - pi

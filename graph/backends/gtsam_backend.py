@@ -22,7 +22,8 @@ from collections.abc import Sequence
 import gtsam
 import numpy as np
 from torchratslam.graph.errors import ConfigError, GraphError
-from torchratslam.graph.posegraph import PoseGraph, UnionFind, wrap_angle
+from torchratslam.graph.geometry import wrap_angle
+from torchratslam.graph.posegraph import PoseGraph, UnionFind
 
 log = logging.getLogger(__name__)
 

@@ -44,6 +44,21 @@ def register(subparsers: Any) -> argparse.ArgumentParser:
         help="skip the pose-cell association shift (the paper's Fig. 12 ablation)",
     )
     p.add_argument(
+        "--exp-pc-shift",
+        choices=("experiences", "templates"),
+        default="experiences",
+        help="shift of the partial experiences' pose-cell coordinates: by the matched "
+        "experiences' difference (default, the authors' code) or by the templates' (the "
+        "paper's single shift), e.g. --exp-pc-shift templates",
+    )
+    p.add_argument(
+        "--match-exp",
+        choices=("first", "nearest"),
+        default="first",
+        help="loaded experience merged at: the matched template's first (default, the "
+        "authors' code) or the one nearest in pose cells, e.g. --match-exp nearest",
+    )
+    p.add_argument(
         "--relax",
         action="store_true",
         help="relax the merged map once (exp_loops passes, exp_backend)",
@@ -88,15 +103,24 @@ def match_last_template(loaded: Any, partial: Any, config: Any) -> tuple[int, fl
 
 
 def main(args: argparse.Namespace) -> int:
+    from torchratslam.maps.io import load_state
     from torchratslam.maps.merge import merge_maps
     from torchratslam.maps.reference_format import write_reference
-    from torchratslam.maps.state import apply_experience_map, load_state, save_map
+    from torchratslam.maps.state import apply_experience_map, save_map
 
     config = load_config(args.config)
     loaded = load_state(args.loaded, config)
     partial = load_state(args.partial, config)
     tid, rel, err = match_last_template(loaded, partial, config)
-    res = merge_maps(loaded, partial, tid, relative_rad=rel, shift_pose_cells=not args.no_pc_shift)
+    res = merge_maps(
+        loaded,
+        partial,
+        tid,
+        relative_rad=rel,
+        shift_pose_cells=not args.no_pc_shift,
+        exp_pc_shift=args.exp_pc_shift,
+        match_exp=args.match_exp,
+    )
     merged = res.state
     if args.relax:
         merged = apply_experience_map(merged, config)

@@ -3,19 +3,10 @@
 from __future__ import annotations
 
 import argparse
-import csv
-import io
-import json
-import math
-import os
-import sys
-import tempfile
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
-from torchratslam.graph.errors import ConfigError, InputError
+from torchratslam.graph.errors import ConfigError
 
 DESCRIPTION = """Run RatSLAM on a dataset.
 
@@ -147,22 +138,11 @@ def register(subparsers: Any) -> argparse.ArgumentParser:
     return p
 
 
-def _mirrored(data: Any) -> bool:
-    """Whether the data's image columns turn counter-clockwise (the simulator's panoramas)."""
-    if hasattr(data, "mirrored"):
-        return bool(data.mirrored)
-    camera = getattr(data, "camera", None)
-    return getattr(camera, "kind", None) == "panoramic"
-
-
 def _topics(args: argparse.Namespace, config: Any) -> tuple[str, str]:
     """Bag topics: the options, else the config's ``topic_root``, else the iRat's."""
-    from torchratslam.readers.datasets import IRAT_IMAGE_TOPIC, IRAT_ODOM_TOPIC
+    from torchratslam.experiments.run_dataset import bag_topics
 
-    root = str(getattr(config.general, "topic_root", "") or "").strip("/")
-    image = args.image_topic or (f"/{root}/camera/image/compressed" if root else IRAT_IMAGE_TOPIC)
-    odom = args.odom_topic or (f"/{root}/odom" if root else IRAT_ODOM_TOPIC)
-    return image, odom
+    return bag_topics(config, args.image_topic, args.odom_topic)
 
 
 def _overrides(items: list[str]) -> dict[str, str]:
@@ -175,189 +155,28 @@ def _overrides(items: list[str]) -> dict[str, str]:
     return out
 
 
-def _atomic_text(path: Path, text: str) -> None:
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=".tmp-", suffix=path.suffix)
-    try:
-        with os.fdopen(fd, "w", newline="") as fh:
-            fh.write(text)
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-
-
-def _csv_text(header: list[str], rows: np.ndarray, int_cols: tuple[int, ...]) -> str:
-    buf = io.StringIO()
-    w = csv.writer(buf, lineterminator="\n")
-    w.writerow(header)
-    for row in rows.tolist():
-        w.writerow([int(v) if i in int_cols else repr(float(v)) for i, v in enumerate(row)])
-    return buf.getvalue()
-
-
-def _created_frames(em: Any, n: int) -> np.ndarray:
-    g = em.graph
-    return np.asarray([int(g.nodes[i].get("frame", -1)) for i in range(n)], dtype=np.int64)
-
-
-def _links(em: Any) -> np.ndarray:
-    if hasattr(em, "links") and callable(em.links):
-        lk = em.links()
-        return np.stack([lk["src"], lk["dst"]], axis=1).astype(np.int64)
-    return np.asarray(list(em.graph.edges()), dtype=np.int64).reshape(-1, 2)
-
-
-def write_outputs(
-    slam: Any, out: Path, result: Any, *, data: Any, extra: dict[str, Any]
-) -> dict[str, Any]:
-    """Write metrics.json, experiences.csv, trajectory.csv, map.png, pose_cells.png and
-    state/ for a finished run. Returns the metrics."""
-    from torchratslam.eval.metrics import interpolate_groundtruth
-    from torchratslam.viz.plots import plot_map, plot_pose_cells
-
-    out.mkdir(parents=True, exist_ok=True)
-    em = slam.experience_map
-    poses = np.asarray(em.poses, dtype=np.float64).reshape(-1, 3)
-    n = poses.shape[0]
-    exp_rows = np.column_stack([np.arange(n), poses, _created_frames(em, n)])
-    _atomic_text(
-        out / "experiences.csv",
-        _csv_text(["id", "x", "y", "th", "created_frame"], exp_rows, (0, 4)),
-    )
-    traj = slam.trajectory()
-    _atomic_text(
-        out / "trajectory.csv",
-        _csv_text(["frame", "t", "experience_id", "x", "y", "th"], traj, (0, 2)),
-    )
-    gt_xy = slam.groundtruth_poses()
-    gt_table = data.groundtruth() if hasattr(data, "groundtruth") else None
-    if gt_xy is None and gt_table is not None and len(gt_table) and traj.shape[0]:
-        gt_xy = interpolate_groundtruth(gt_table, traj[:, 1])
-    ate = dr = None
-    if gt_xy is not None and traj.shape[0] >= 2:
-        table = None if slam.groundtruth_poses() is not None else gt_table
-        ate = slam.ate(table)
-        dr = slam.dead_reckoning_ate(table)
-    summary = result.timings
-    per_module = {
-        name: {"mean_ms": s["mean_ms"], "median_ms": s["median_ms"]} for name, s in summary.items()
-    }
-    metrics: dict[str, Any] = {
-        "frames": int(slam.frame_index),
-        "frames_this_run": int(result.frames),
-        "templates": int(result.templates),
-        "experiences": int(result.experiences),
-        "links": int(result.links),
-        "wall_s": float(result.wall_s),
-        "fps": float(result.fps),
-        "ms_per_frame": per_module,
-        "pipelined": bool(result.pipelined),
-        "backend": slam.config.experience_map.exp_backend,
-        "odometry": slam.odometry_name,
-        **extra,
-    }
-    if ate is not None:
-        metrics["ate_rmse_m"] = float(ate)
-    if dr is not None:
-        metrics["dead_reckoning_ate_m"] = float(dr)
-    if hasattr(slam, "merges"):
-        metrics["merges"] = _jsonable(slam.merges)
-    plot_map(
-        out / "map.png",
-        poses,
-        _links(em),
-        trajectory_xy=traj[:, 3:5] if gt_xy is not None else None,
-        groundtruth_xy=None if gt_xy is None else np.asarray(gt_xy)[:, :2],
-        world=getattr(data, "world", None),
-        title=str(extra.get("data", "experience map")),
-    )
-    centres = slam.pc_log() if hasattr(slam, "pc_log") else None
-    plot_pose_cells(out / "pose_cells.png", slam.activity, centres=centres)
-    from torchratslam.maps.state import save_state
-
-    save_state(slam, out / "state")
-    _atomic_text(out / "metrics.json", json.dumps(metrics, indent=2, default=_json_default) + "\n")
-    return metrics
-
-
-def _json_default(v: Any) -> Any:
-    if isinstance(v, np.generic):
-        return v.item()
-    if isinstance(v, np.ndarray):
-        return v.tolist()
-    return str(v)
-
-
-def _jsonable(v: Any) -> Any:
-    return json.loads(json.dumps(v, default=_json_default))
-
-
 def main(args: argparse.Namespace) -> int:
-    import torch
+    from torchratslam.experiments.run_dataset import run_dataset, summary_line
 
-    from torchratslam.config import load_config
-    from torchratslam.pipeline import RatSLAM
-    from torchratslam.readers.datasets import open_data
-
-    if args.threads < 1:
-        raise InputError(f"--threads must be >= 1, got {args.threads}")
-    torch.set_num_threads(args.threads)
-    if args.max_frames is not None and args.max_frames <= 0:
-        raise InputError(f"--max-frames must be a positive number of frames, got {args.max_frames}")
     overrides = _overrides(args.set)
     if args.backend:
         overrides["exp_backend"] = args.backend
-    config = load_config(args.config, **overrides)
-    image_topic, odom_topic = _topics(args, config)
-    data = open_data(
+    metrics = run_dataset(
+        args.config,
         args.data,
-        odometry=args.odometry,
+        args.out,
+        overrides=overrides,
+        odometry_file=args.odometry,
         groundtruth=args.groundtruth,
-        image_topic=image_topic,
-        odom_topic=odom_topic,
+        image_topic=args.image_topic,
+        odom_topic=args.odom_topic,
+        visual_odometry=args.visual_odometry,
+        load=args.load,
+        device=args.device,
+        pipelined=args.pipelined,
+        max_frames=args.max_frames,
+        progress=not args.no_progress,
+        threads=args.threads,
     )
-    odometry: Any = None  # the config's choice (default: the data's odometry)
-    odometry_label = None
-    if args.visual_odometry or not getattr(data, "has_odometry", True):
-        from torchratslam.readers.visual_odometry import VisualOdometry
-
-        odometry = VisualOdometry(config.visual_odometry, mirrored=_mirrored(data))
-        odometry_label = "visual"
-        if not args.visual_odometry:
-            print(
-                f"torchratslam run: {args.data} has no odometry; using visual odometry",
-                file=sys.stderr,
-            )
-    out = Path(args.out)
-    if out.exists() and not out.is_dir():
-        raise InputError(f"--out {out}: exists and is not a directory; choose another path")
-    out.mkdir(parents=True, exist_ok=True)
-    device = torch.device(args.device) if args.device else None
-    kwargs: dict[str, Any] = {"odometry": odometry, "device": device, "pipelined": args.pipelined}
-    if args.load:
-        from torchratslam.maps.state import load_state
-        from torchratslam.multisession.session import MultiSessionRatSLAM
-
-        stored = [load_state(p) for p in args.load]
-        slam: Any = MultiSessionRatSLAM(config, stored, **kwargs)
-    else:
-        slam = RatSLAM(config, **kwargs)
-    result = slam.run(data, max_frames=args.max_frames, progress=not args.no_progress)
-    if result.frames == 0:
-        raise InputError(f"{args.data}: no frames were read; check the dataset")
-    extra: dict[str, Any] = {"data": str(args.data), "config": str(args.config)}
-    if odometry_label:
-        extra["odometry"] = odometry_label
-    if args.load:
-        extra["loaded"] = [str(p) for p in args.load]
-    metrics = write_outputs(slam, out, result, data=data, extra=extra)
-    line = (
-        f"{metrics['frames_this_run']} frames in {metrics['wall_s']:.1f} s "
-        f"({metrics['fps']:.1f} frames/s): {metrics['templates']} templates, "
-        f"{metrics['experiences']} experiences, {metrics['links']} links"
-    )
-    if "ate_rmse_m" in metrics:
-        ate = metrics["ate_rmse_m"]
-        line += f", ATE {ate:.3f} m" if math.isfinite(ate) else ""
-    print(f"{line}; wrote {out}")
+    print(summary_line(metrics, Path(args.out)))
     return 0

@@ -1,7 +1,16 @@
-"""Evaluation: trajectory error, alignment, dead reckoning and ICP between maps."""
+"""Evaluation: trajectory error, alignment, dead reckoning and ICP between maps (the
+paper's LibICP residual in :mod:`torchratslam.eval.icp`)."""
 
+from torchratslam.eval.icp import (
+    PAPER_ICP_MSE_M2,
+    LibIcpResult,
+    compare_icp,
+    libicp_point_to_point,
+    nearest_neighbours,
+)
 from torchratslam.eval.metrics import (
     IcpResult,
+    Se2Alignment,
     align_se2,
     apply_se2,
     ate_rmse,
@@ -12,12 +21,18 @@ from torchratslam.eval.metrics import (
 )
 
 __all__ = [
+    "PAPER_ICP_MSE_M2",
     "IcpResult",
+    "LibIcpResult",
+    "Se2Alignment",
     "align_se2",
     "apply_se2",
     "ate_rmse",
+    "compare_icp",
     "dead_reckoning",
     "icp",
     "icp_rmse",
     "interpolate_groundtruth",
+    "libicp_point_to_point",
+    "nearest_neighbours",
 ]

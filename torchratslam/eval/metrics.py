@@ -1,16 +1,15 @@
 """Map evaluation: ATE after rigid SE(2) alignment, dead reckoning, and ICP RMSE.
 
-* :func:`align_se2` -- the least-squares rigid motion (rotation + translation, no
-  scale) that maps one 2D point set onto another (Umeyama's closed form in 2D, computed
-  by :func:`torchratslam.graph.geometry.umeyama_se2`, shared with the graph package).
-* :func:`ate_rmse` -- absolute trajectory error: RMSE of the position differences
-  after that alignment.
-* :func:`dead_reckoning` -- integrate (vtrans, vrot, dt) the way the experience map
-  does (heading first, then the step along it), for the "odometry only" baseline.
-* :func:`icp` / :func:`icp_rmse` -- point-to-point ICP between two maps like libicp
-  (which the multisession and xRatSLAM papers used to compare experience maps):
-  nearest neighbours, closed-form rigid update, repeat until the motion is tiny;
-  the RMSE is over the final nearest-neighbour distances.
+* :func:`align_se2`, :func:`apply_se2`, :func:`ate_rmse`, :func:`dead_reckoning` --
+  rigid SE(2) alignment (Umeyama's closed form in 2D), absolute trajectory error and
+  odometry integration; they live in :mod:`torchratslam.graph.geometry` and are
+  re-exported here.
+* :func:`interpolate_groundtruth` -- ground-truth poses at given times.
+* :func:`icp` / :func:`icp_rmse` -- the project's ICP figure (not the papers'):
+  point-to-point ICP between two maps (nearest neighbours, closed-form rigid update,
+  repeat until the motion is tiny); the RMSE (m) over the final nearest-neighbour
+  distances. The papers' figure is LibICP's mean
+  squared residual (m^2): :func:`torchratslam.eval.icp.libicp_point_to_point`.
 
 All functions are numpy-only and deterministic.
 """
@@ -23,11 +22,18 @@ from dataclasses import dataclass
 import numpy as np
 
 from torchratslam.graph.errors import InputError
-from torchratslam.graph.geometry import ate_rmse as _graph_ate_rmse
-from torchratslam.graph.geometry import umeyama_se2
+from torchratslam.graph.geometry import (
+    Se2Alignment,
+    align_se2,
+    apply_se2,
+    ate_rmse,
+    dead_reckoning,
+    wrap_angle,
+)
 
 __all__ = [
     "IcpResult",
+    "Se2Alignment",
     "align_se2",
     "apply_se2",
     "ate_rmse",
@@ -47,70 +53,6 @@ def _points(a: np.ndarray, name: str) -> np.ndarray:
     if not np.all(np.isfinite(arr[:, :2])):
         raise InputError(f"{name}: contains NaN or infinite positions; clean the input first")
     return arr[:, :2]
-
-
-def align_se2(source: np.ndarray, target: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Rigid motion ``(R, t)`` minimising ``sum |R @ s_i + t - d_i|^2`` (no scale).
-
-    Args:
-        source: points to move. Shape: ``(N, 2)`` or ``(N, 3)`` (a third column, the
-            heading, is ignored).
-        target: corresponding points. Shape: same N as ``source``.
-
-    Returns:
-        ``R`` (2, 2) rotation matrix and ``t`` (2,) translation.
-
-    Raises:
-        InputError: shapes differ, fewer than 2 points, or non-finite values.
-    """
-    s = _points(source, "source")
-    d = _points(target, "target")
-    if s.shape[0] != d.shape[0]:
-        raise InputError(f"cannot align {s.shape[0]} points with {d.shape[0]}: counts differ")
-    if s.shape[0] < 2:
-        raise InputError("rigid alignment needs at least 2 corresponding points")
-    angle, t = umeyama_se2(s, d)
-    c, sn = math.cos(angle), math.sin(angle)
-    return np.array([[c, -sn], [sn, c]]), np.asarray(t, dtype=np.float64)
-
-
-def apply_se2(points: np.ndarray, rot: np.ndarray, t: np.ndarray) -> np.ndarray:
-    """Apply ``(R, t)`` to positions; a heading column (if any) is rotated too.
-
-    Shape:
-        points: ``(N, 2)`` or ``(N, 3)``; returns the same shape.
-    """
-    p = np.asarray(points, dtype=np.float64)
-    out = p.copy()
-    out[:, :2] = p[:, :2] @ rot.T + t
-    if p.shape[1] >= 3:
-        dth = math.atan2(rot[1, 0], rot[0, 0])
-        out[:, 2] = np.angle(np.exp(1j * (p[:, 2] + dth)))
-    return out
-
-
-def ate_rmse(estimate: np.ndarray, groundtruth: np.ndarray, *, align: bool = True) -> float:
-    """Absolute trajectory error (metres): RMSE of positions after SE(2) alignment.
-
-    Args:
-        estimate: estimated positions. Shape: ``(N, 2)`` or ``(N, 3)``.
-        groundtruth: true positions at the same instants. Shape: ``(N, 2)`` or ``(N, 3)``.
-        align: align the estimate onto the ground truth first (rigid, no scale).
-
-    Raises:
-        InputError: mismatched counts or non-finite values.
-    """
-    e = _points(estimate, "estimate")
-    g = _points(groundtruth, "groundtruth")
-    if e.shape[0] != g.shape[0]:
-        raise InputError(
-            f"ATE needs one ground-truth pose per estimate: got {e.shape[0]} and {g.shape[0]}"
-        )
-    if e.shape[0] == 0:
-        raise InputError("ATE of an empty trajectory is undefined")
-    if align and e.shape[0] >= 2:
-        return _graph_ate_rmse(e, g)
-    return float(np.sqrt(np.mean(np.sum((e - g) ** 2, axis=1))))
 
 
 def interpolate_groundtruth(groundtruth: np.ndarray, t: np.ndarray) -> np.ndarray:
@@ -136,35 +78,8 @@ def interpolate_groundtruth(groundtruth: np.ndarray, t: np.ndarray) -> np.ndarra
         ],
         axis=1,
     )
-    out[:, 2] = np.angle(np.exp(1j * out[:, 2]))
+    out[:, 2] = wrap_angle(out[:, 2], include_pi=True)
     return out
-
-
-def dead_reckoning(
-    vtrans: np.ndarray,
-    vrot: np.ndarray,
-    dt: np.ndarray,
-    *,
-    start: tuple[float, float, float] = (0.0, 0.0, 0.0),
-) -> np.ndarray:
-    """Integrate odometry as the experience map does: turn by ``vrot*dt``, then step
-    ``vtrans*dt`` along the new heading.
-
-    Shape:
-        vtrans, vrot, dt: ``(N,)``; returns ``(N, 3)`` poses after each step.
-    """
-    v = np.asarray(vtrans, dtype=np.float64)
-    w = np.asarray(vrot, dtype=np.float64)
-    h = np.asarray(dt, dtype=np.float64)
-    if not (v.shape == w.shape == h.shape) or v.ndim != 1:
-        raise InputError(
-            "vtrans, vrot and dt must be (N,) arrays of one length: "
-            f"{v.shape}, {w.shape}, {h.shape}"
-        )
-    th = start[2] + np.cumsum(w * h)
-    x = start[0] + np.cumsum(v * h * np.cos(th))
-    y = start[1] + np.cumsum(v * h * np.sin(th))
-    return np.stack([x, y, np.angle(np.exp(1j * th))], axis=1)
 
 
 @dataclass(frozen=True)
@@ -238,7 +153,8 @@ def icp(
         keep = np.ones_like(d2, dtype=bool) if max_distance is None else d2 <= max_distance**2
         if keep.sum() < 2:
             break
-        r_inc, t_inc = align_se2(moved[keep], dst[j[keep]])
+        fit = align_se2(moved[keep], dst[j[keep]])
+        r_inc, t_inc = fit.rotation, fit.translation
         rot, t = r_inc @ rot, r_inc @ t + t_inc
         if abs(math.atan2(r_inc[1, 0], r_inc[0, 0])) + float(np.linalg.norm(t_inc)) < tolerance:
             break

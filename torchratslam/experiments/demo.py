@@ -31,10 +31,10 @@ def run_multisession_demo(out_dir: Path, *, progress: bool = True) -> Path:
     Returns:
         The path of the written ``report.md``.
     """
-    from torchratslam.cli.multisession import report_markdown, run
+    from torchratslam.experiments.multisession_tour import report_markdown, run_experiment
 
     out = Path(out_dir) / "multisession"
-    result = run(
+    result = run_experiment(
         None, "sim:virtual_tour", out, ablation=True, backends=("alpha", "gtsam"), progress=progress
     )
     print(report_markdown(result["report"]))

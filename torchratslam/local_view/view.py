@@ -55,6 +55,7 @@ from typing import Any, cast
 import numpy as np
 import torch
 import torch.nn.functional as F
+from torch import nn
 
 from torchratslam.config import LocalViewParams
 from torchratslam.graph.errors import ConfigError, InputError, MapFormatError
@@ -353,6 +354,9 @@ class TemplateBank:
 
 
 # ------------------------------------------------------------------------- matcher
+def _check_dtype(dtype: torch.dtype) -> None:
+    if dtype not in (torch.float32, torch.float64):
+        raise ConfigError(f"dtype must be torch.float32 or torch.float64, got {dtype}")
 
 
 class TemplateMatcher:
@@ -719,8 +723,17 @@ class TemplateMatcher:
 # --------------------------------------------------------------------- the modules
 
 
-class _TemplateView:
-    """Shared machinery of :class:`LocalView` and :class:`FeatureView`."""
+class _TemplateView(nn.Module):
+    """Shared machinery of :class:`LocalView` and :class:`FeatureView`.
+
+    A ``torch.nn.Module`` without parameters: ``.to(device, dtype)``, ``.double()``,
+    ``.float()``, ``.cpu()`` and ``.cuda()`` move the template bank and rebuild what is
+    derived from it (the matcher's index tensors and per-template summaries) in the new
+    dtype and device; ``state_dict()`` holds the whole state (all templates, their
+    creation frames, the current and previous template, the frame counter) as CPU
+    tensors and Python scalars under ``_extra_state``, so ``torch.save`` /
+    ``torch.load(weights_only=True)`` and ``load_state_dict`` round-trip it.
+    """
 
     kind = "base"
 
@@ -735,8 +748,8 @@ class _TemplateView:
     ) -> None:
         if not isinstance(params, LocalViewParams):
             raise ConfigError(f"expected LocalViewParams, got {type(params).__name__}")
-        if dtype not in (torch.float32, torch.float64):
-            raise ConfigError(f"dtype must be torch.float32 or torch.float64, got {dtype}")
+        _check_dtype(dtype)
+        super().__init__()
         self.params = params
         self.dtype = dtype
         self.device = torch.device(device) if device is not None else torch.device("cpu")
@@ -879,6 +892,10 @@ class _TemplateView:
         self.current_id = new
         return ViewMatch(new, 0.0, err, 0, True)
 
+    def forward(self, observation: Any, frame_index: int | None = None) -> ViewMatch:
+        """``module(observation)`` is :meth:`process` (the ``nn.Module`` call)."""
+        return self.process(observation, frame_index)
+
     def add_templates(self, templates: Any, frames: Any = None) -> range:
         """Append templates (e.g. from a merged map); returns their new ids.
 
@@ -958,6 +975,33 @@ class _TemplateView:
 
     def _set_extra_state(self, state: dict) -> None:
         pass
+
+    # -- torch.nn.Module behaviour
+    def _apply(self, fn: Callable[[torch.Tensor], torch.Tensor], recurse: bool = True) -> Any:
+        """Follow ``.to`` / ``.double`` / ``.float`` / ``.cuda``: rebuild the bank and matcher
+        in the dtype and device that ``fn`` gives a floating tensor."""
+        probe = fn(torch.zeros((), dtype=self.dtype, device=self.device))
+        if (probe.dtype, probe.device) != (self.dtype, self.device):
+            _check_dtype(probe.dtype)
+            state = self.get_state()
+            self.dtype, self.device = probe.dtype, probe.device
+            self.set_state(state)  # the summaries and index tensors are derived again
+        return super()._apply(fn, recurse)
+
+    def get_extra_state(self) -> dict:
+        """:meth:`get_state` with arrays as CPU tensors (what ``state_dict()`` stores)."""
+        return {
+            k: torch.from_numpy(np.ascontiguousarray(v)) if isinstance(v, np.ndarray) else v
+            for k, v in self.get_state().items()
+        }
+
+    def set_extra_state(self, state: Any) -> None:
+        """Restore :meth:`get_extra_state`'s output (``load_state_dict()``)."""
+        if not isinstance(state, dict):
+            raise MapFormatError(f"local view state_dict entry is a {type(state).__name__}")
+        self.set_state(
+            {k: v.numpy() if isinstance(v, torch.Tensor) else v for k, v in state.items()}
+        )
 
     def _validate_shape(self, shape: tuple[int, ...]) -> None:
         pass

@@ -1,7 +1,9 @@
 """Saved maps: the in-memory map state, the native and the authors' reference formats, merges."""
 
+from torchratslam.maps.io import convert_map, load_state, map_format, reference_losses
 from torchratslam.maps.merge import (
     MergeResult,
+    first_experience,
     merge_maps,
     pc_distance,
     pick_experience,
@@ -19,7 +21,6 @@ from torchratslam.maps.state import (
     MapState,
     check_compatible,
     load_map,
-    load_state,
     save_map,
     save_state,
 )
@@ -31,13 +32,17 @@ __all__ = [
     "MapState",
     "MergeResult",
     "check_compatible",
+    "convert_map",
+    "first_experience",
     "is_reference_map",
     "load_map",
     "load_state",
+    "map_format",
     "merge_maps",
     "pc_distance",
     "pick_experience",
     "read_reference",
+    "reference_losses",
     "save_map",
     "save_state",
     "shift_activity",

@@ -8,16 +8,26 @@ i. appends the partial templates except ``z`` after the loaded ones (Eq. 9); par
    template ``i`` gets id ``n_vl + i`` (``i < z``), ``z`` becomes ``u``;
 ii. moves the pose-cell activity from the partial packet ``P_z`` to the loaded
     ``P_u``: the activity array is rolled by the rounded shift;
-iii. shifts every partial template and experience pose-cell association by
-     ``Delta = P_u - P_z`` modulo the network size (Eqs. 10-12). The paper's Eq. 10
-     prints a ``+``; the working definition, used by the authors' code, is the
-     difference. ``shift_pose_cells=False`` skips this step (the Fig. 12 ablation);
+iii. shifts every partial template's pose-cell association by ``Delta = P_u - P_z``
+     modulo the network size (Eqs. 10-12). The paper's Eq. 10 prints a ``+``; the
+     working definition, used by the authors' code, is the difference. The partial
+     experiences' pose-cell coordinates are shifted too: by default as the authors'
+     code does, by the difference of the two matched *experiences'* coordinates
+     (``exp_pc_shift="experiences"``); ``exp_pc_shift="templates"`` is the paper's
+     reading of Eq. 15 (one shift, the templates', for both). ``shift_pose_cells=False``
+     skips this step (the Fig. 12 ablation);
 iv. moves every partial experience by the rigid 2D transform that maps the partial
     matching experience ``e_z`` onto the loaded ``e_u``, with ``dth = th_u - th_z +
     relative view angle`` (Eqs. 13-14 are garbled in print; this is the arithmetic of
     the authors' code, see ``reference-save-format.md``), drops ``e_z``, re-points the
     links that ended (or started) at it to ``e_u`` and appends the rest (Eqs. 15-17).
     Link measurements are relative to their source experience and stay valid.
+
+Which experiences are matched: by default as the authors' code, ``e_u`` is the *first*
+experience of the loaded template ``u`` and ``e_z`` the partial map's last experience
+(``match_exp="first"``); ``match_exp="nearest"`` (this project's earlier choice) takes,
+for both, the experience of the matched template closest in pose cells to the
+template's own association.
 
 Everything is vectorised: the cost is linear in the sizes of both maps (Section 3.5).
 """
@@ -33,6 +43,7 @@ from typing import Any
 import numpy as np
 
 from torchratslam.graph.errors import GraphError
+from torchratslam.graph.geometry import pc_distance, wrap_angle
 from torchratslam.maps.state import (
     EM_ACCUM,
     INT_FIELDS,
@@ -40,28 +51,35 @@ from torchratslam.maps.state import (
     PER_ENTITY,
     MapState,
     check_compatible,
+    require_templates,
 )
 
-__all__ = ["MergeResult", "merge_maps", "pc_distance", "pick_experience", "shift_activity"]
+__all__ = [
+    "EXP_PC_SHIFTS",
+    "MATCH_EXPS",
+    "MergeResult",
+    "first_experience",
+    "merge_maps",
+    "pc_distance",
+    "pick_experience",
+    "shift_activity",
+]
+
+EXP_PC_SHIFTS = ("experiences", "templates")
+"""``merge_maps(exp_pc_shift=...)``: how the partial experiences' pose-cell coordinates
+are shifted. ``"experiences"`` (default, the authors' code): by ``exp_pc[e_u] -
+exp_pc[e_z]``; ``"templates"`` (the paper's Eq. 15 read literally): by the templates'
+``template_pc[u] - template_pc[z]``, like the template associations."""
+MATCH_EXPS = ("first", "nearest")
+"""``merge_maps(match_exp=...)``: which experiences are matched. ``"first"`` (default, the
+authors' code): ``e_u`` the first experience of ``u``, ``e_z`` the partial map's last
+experience; ``"nearest"``: for both, the matched template's experience nearest in pose
+cells to the template's association (:func:`pick_experience`)."""
+# per-experience extras whose "none" value is not 0 (reference-format goal fields)
+_FILL = {"exp:ref_goal_to_current": -1.0, "exp:ref_current_to_goal": -1.0}
+_DROP_SCALARS = "ref.tail."  # the secondary tails of a reference save: stale after a merge
 
 log = logging.getLogger(__name__)
-
-
-def _wrap(a: np.ndarray | float) -> np.ndarray | float:
-    """Angles to (-pi, pi]."""
-    return np.pi - np.mod(np.pi - np.asarray(a, dtype=np.float64), 2 * np.pi)
-
-
-def pc_distance(a: np.ndarray, b: np.ndarray, dims: tuple[int, int, int]) -> np.ndarray:
-    """Pose-cell distance: per axis the shorter way round the ring, then Euclidean.
-
-    Shape:
-        a: ``(..., 3)`` (x, y, th cells); b broadcastable to it; returns ``a.shape[:-1]``.
-    """
-    d = np.abs(np.asarray(a, np.float64) - np.asarray(b, np.float64))
-    n = np.asarray(dims, np.float64)
-    d = np.minimum(np.mod(d, n), n - np.mod(d, n))
-    return np.sqrt((d * d).sum(-1))
 
 
 def pick_experience(state: MapState, template_id: int, pc: np.ndarray | None = None) -> int:
@@ -74,6 +92,13 @@ def pick_experience(state: MapState, template_id: int, pc: np.ndarray | None = N
     ref = state.template_pc[template_id] if pc is None else np.asarray(pc, np.float64)
     d = pc_distance(state.exp_pc[cand], ref, state.pc_dims)
     return int(cand[int(np.argmin(d))])
+
+
+def first_experience(state: MapState, template_id: int) -> int:
+    """The first (lowest-id) experience of ``template_id``, -1 if it has none: the one
+    the authors' code merges at (a template's ``exps[0]``)."""
+    cand = np.flatnonzero(state.exp_template == template_id)
+    return int(cand[0]) if cand.size else -1
 
 
 def shift_activity(
@@ -153,7 +178,7 @@ def rigid_transform(poses: np.ndarray, dth: float, tx: float, ty: float) -> np.n
     p[..., 0] = c * x - s * y + tx
     p[..., 1] = s * x + c * y + ty
     if p.shape[-1] > 2:
-        p[..., 2] = _wrap(p[..., 2] + dth)
+        p[..., 2] = wrap_angle(p[..., 2] + dth, include_pi=True)
     return p
 
 
@@ -167,6 +192,8 @@ def merge_maps(
     loaded_exp: int | None = None,
     partial_exp: int | None = None,
     shift_pose_cells: bool = True,
+    exp_pc_shift: str = "experiences",
+    match_exp: str = "first",
 ) -> MergeResult:
     """Merge ``partial`` into ``loaded`` (Algorithm 1), given the template match.
 
@@ -176,19 +203,30 @@ def merge_maps(
         loaded_template: ``u``, the loaded template matched.
         partial_template: ``z``, the partial template that matched (default: the last).
         relative_rad: relative view angle of the match (panoramic mode; 0 otherwise).
-        loaded_exp: ``e_u`` (default: the experience of ``u`` closest in pose cells to
-            ``u``'s association).
-        partial_exp: ``e_z``, the partial experience to drop (default: the experience of
-            ``z`` closest to ``z``'s association, else the partial current experience).
+        loaded_exp: ``e_u`` (default: chosen by ``match_exp``).
+        partial_exp: ``e_z``, the partial experience to drop (default: chosen by
+            ``match_exp``; the partial current experience when ``z`` has none).
         shift_pose_cells: False skips step (iii) (the paper's Fig. 12 ablation).
+        exp_pc_shift: ``"experiences"`` (default, the authors' code) or ``"templates"``
+            (the paper's single shift), see :data:`EXP_PC_SHIFTS`.
+        match_exp: ``"first"`` (default, the authors' code) or ``"nearest"``, see
+            :data:`MATCH_EXPS`.
 
     Returns:
         A :class:`MergeResult`. The inputs are not modified.
 
     Raises:
-        MapFormatError: the maps have different pose-cell or template sizes.
-        GraphError: ``u`` or ``z`` is out of range, or ``u`` has no experience.
+        MapFormatError: the maps have different pose-cell or template sizes, or one was
+            read without its templates.
+        GraphError: ``u`` or ``z`` is out of range, ``u`` has no experience, or an
+            unknown option.
     """
+    if exp_pc_shift not in EXP_PC_SHIFTS:
+        raise GraphError(f"exp_pc_shift must be one of {EXP_PC_SHIFTS}, got {exp_pc_shift!r}")
+    if match_exp not in MATCH_EXPS:
+        raise GraphError(f"match_exp must be one of {MATCH_EXPS}, got {match_exp!r}")
+    require_templates(loaded, what="the loaded map")
+    require_templates(partial, what="the partial map")
     check_compatible(loaded, partial.config, what="loaded map")
     n_vl, n_vp = loaded.n_templates, partial.n_templates
     n_el, n_ep = loaded.n_experiences, partial.n_experiences
@@ -198,14 +236,19 @@ def merge_maps(
         raise GraphError(f"loaded template {u} does not exist (the loaded map has {n_vl})")
     if not 0 <= z < n_vp:
         raise GraphError(f"partial template {z} does not exist (the partial map has {n_vp})")
-    e_u = pick_experience(loaded, u) if loaded_exp is None else int(loaded_exp)
+    if loaded_exp is not None:
+        e_u = int(loaded_exp)
+    elif match_exp == "first":
+        e_u = first_experience(loaded, u)
+    else:
+        e_u = pick_experience(loaded, u)
     if not 0 <= e_u < n_el:
         raise GraphError(
             f"loaded template {u} has no experience to merge at; match another "
             "template or let the stored map create one"
         )
     if partial_exp is None:
-        e_z = pick_experience(partial, z)
+        e_z = n_ep - 1 if match_exp == "first" else pick_experience(partial, z)
         if e_z < 0:
             e_z = partial.current_exp
     else:
@@ -224,7 +267,11 @@ def merge_maps(
     t_pc = np.mod(partial.template_pc[keep_t] + assoc_shift, dims)
     # (iv) experiences, Eqs. 13-17
     if e_z >= 0:
-        dth = float(_wrap(loaded.exp_pose[e_u, 2] - partial.exp_pose[e_z, 2] + relative_rad))
+        dth = float(
+            wrap_angle(
+                loaded.exp_pose[e_u, 2] - partial.exp_pose[e_z, 2] + relative_rad, include_pi=True
+            )
+        )
         c, s = math.cos(dth), math.sin(dth)
         pz = partial.exp_pose[e_z, :2]
         tx = loaded.exp_pose[e_u, 0] - (c * pz[0] - s * pz[1])
@@ -236,7 +283,13 @@ def merge_maps(
         keep_e[e_z] = False
     emap = _remap(n_ep, e_z, e_u, n_el)
     new_pose = rigid_transform(partial.exp_pose[keep_e], dth, tx, ty)
-    new_pc = np.mod(partial.exp_pc[keep_e] + assoc_shift, dims)
+    if not shift_pose_cells:
+        exp_shift = np.zeros(3)
+    elif exp_pc_shift == "experiences" and e_z >= 0:
+        exp_shift = loaded.exp_pc[e_u] - partial.exp_pc[e_z]
+    else:
+        exp_shift = delta
+    new_pc = np.mod(partial.exp_pc[keep_e] + exp_shift, dims)
     new_tpl = _apply(tmap, partial.exp_template[keep_e])
     lf, lt = _apply(emap, partial.link_from), _apply(emap, partial.link_to)
     keep_l = lf != lt  # a link between e_z and e_u cannot exist; guard anyway
@@ -253,19 +306,25 @@ def merge_maps(
             n_a = getattr(loaded, PER_ENTITY[prefix]).shape[0]
             n_b = getattr(partial, PER_ENTITY[prefix]).shape[0]
             ref = a if a is not None else b
-            assert ref is not None  # the key is in one of the two maps
+            assert ref is not None  # the key comes from one of the two maps
+            fill = _FILL.get(key, 0)
             if a is None:
-                a = np.zeros((n_a, *ref.shape[1:]), ref.dtype)
+                a = np.full((n_a, *ref.shape[1:]), fill, ref.dtype)
             if b is None:
-                b = np.zeros((n_b, *ref.shape[1:]), ref.dtype)
+                b = np.full((n_b, *ref.shape[1:]), fill, ref.dtype)
             extra[key] = cat(a, b[keep_of[prefix]])
+        elif key == "ref.goal_list":  # goal experience ids of both maps, in merged ids
+            goals = [np.asarray(loaded.extra.get(key, np.zeros(0)), np.int64)]
+            if key in partial.extra:
+                goals.append(_apply(emap, np.asarray(partial.extra[key], np.int64)))
+            extra[key] = np.concatenate(goals)
         elif key in partial.extra:
             extra[key] = np.array(partial.extra[key], copy=True)
     # the session's running values move with the robot into the loaded map
     if EM_ACCUM in extra:  # [x, y, facing, time] accumulated in the partial map's frame
         acc = np.array(extra[EM_ACCUM], np.float64, copy=True)
         acc[:2] = rigid_transform(acc[:2], dth, 0.0, 0.0)
-        acc[2] = float(_wrap(acc[2] + dth))
+        acc[2] = float(wrap_angle(acc[2] + dth, include_pi=True))
         extra[EM_ACCUM] = acc
     if PC_BEST in extra:  # the decoded packet centre moves with the activity roll
         src = partial.template_pc[z]
@@ -297,8 +356,12 @@ def merge_maps(
         link_dt=cat(loaded.link_dt, partial.link_dt[keep_l]),
         activity=shift_activity(partial.activity, delta, partial.template_pc[z]),
         extra=extra,
-        scalars=dict(partial.scalars),
-        **ids,
+        scalars={k: v for k, v in partial.scalars.items() if not k.startswith(_DROP_SCALARS)},
+        current_vt=ids["current_vt"],
+        prev_vt=ids["prev_vt"],
+        current_exp=ids["current_exp"],
+        prev_exp=ids["prev_exp"],
+        frame_index=ids["frame_index"],
     )
     info = {
         "loaded_template": u,
@@ -307,6 +370,9 @@ def merge_maps(
         "partial_exp": e_z,
         "pc_shift": [float(v) for v in delta],
         "pc_shift_applied": bool(shift_pose_cells),
+        "exp_pc_shift": [float(v) for v in exp_shift],
+        "exp_pc_shift_mode": exp_pc_shift,
+        "match_exp": match_exp,
         "transform": [dth, float(tx), float(ty)],
         "template_ids": tmap,
         "exp_ids": emap,

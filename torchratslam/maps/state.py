@@ -60,6 +60,9 @@ FORMAT_NAME = "torchratslam-map"
 FORMAT_VERSION = 1
 STATE_NPZ = "state.npz"
 STATE_JSON = "state.json"
+MISSING_KEY = "missing_files"
+"""Scalar key: the files a map was read without (a reference-format save lacking
+``localviewcells.txt`` has zero templates in their place; see :func:`require_templates`)."""
 
 # name -> (kind, ndim) ; kind "f" float, "i" integer. Shapes are cross-checked below.
 ARRAY_FIELDS: dict[str, tuple[str, int]] = {
@@ -510,14 +513,14 @@ def _resolve_native(path: Path) -> Path | None:
 
 
 def load_state(path: str | Path, config: Any = None) -> MapState:
-    """Load a map: a saved state directory, a run's OUT directory (``OUT/state/``), or a
-    directory in the reference implementation's text format.
+    """Load a native map: a saved state directory or a run's OUT directory
+    (``OUT/state/``). :func:`torchratslam.maps.io.load_state` also reads the reference
+    implementation's text format.
 
     Args:
         path: the directory.
-        config: a ``RatSLAMConfig`` (or flat dict). Needed to shape the templates of a
-            reference-format map (that format stores only their total size); when given,
-            the map's compatibility with it is checked too.
+        config: a ``RatSLAMConfig`` (or flat dict); when given, the map's
+            compatibility with it is checked.
 
     Raises:
         InputError: nothing loadable at ``path``.
@@ -530,18 +533,13 @@ def load_state(path: str | Path, config: Any = None) -> MapState:
             "directory, or a reference-format map directory"
         )
     native = _resolve_native(p) if p.is_dir() else None
-    if native is not None:
-        state = load_map(native)
-    else:
-        from torchratslam.maps.reference_format import is_reference_map, read_reference
-
-        if p.is_dir() and is_reference_map(p):
-            state = read_reference(p, config)
-        else:
-            raise InputError(
-                f"{p} holds no saved map: expected {STATE_JSON} + {STATE_NPZ}, a state/ "
-                "subdirectory (a run's OUT dir), or the reference format's localviewcells.txt"
-            )
+    if native is None:
+        raise InputError(
+            f"{p} holds no saved map: expected {STATE_JSON} + {STATE_NPZ} or a state/ "
+            "subdirectory (a run's OUT dir); reference-format maps load with "
+            "torchratslam.maps.io.load_state"
+        )
+    state = load_map(native)
     if config is not None:
         check_compatible(state, config, what=f"map {str(p)!r}")
     state.name = str(p)
@@ -678,6 +676,19 @@ def apply_experience_map(state: MapState, config: Any, *, passes: int | None = N
     return out
 
 
+def require_templates(state: MapState, *, what: str = "map") -> None:
+    """Raise :class:`MapFormatError` when ``state`` was read without its templates (a
+    reference-format save lacking ``localviewcells.txt``): it can be plotted and compared,
+    but not merged or continued."""
+    missing = state.scalars.get(MISSING_KEY)
+    if missing:
+        raise MapFormatError(
+            f"{what} ({state.name or 'in memory'}) has no templates: {missing} is missing "
+            "from its directory; merging or continuing a map needs its templates (plots, "
+            "ICP and ATE work without them)"
+        )
+
+
 def conform(state: MapState, config: Any, *, what: str = "stored map") -> MapState:
     """``state`` made usable with ``config``: a reference-format map read without a
     config (templates ``(N, 1, S)``, no pose-cell sizes) gets its templates reshaped to
@@ -687,6 +698,7 @@ def conform(state: MapState, config: Any, *, what: str = "stored map") -> MapSta
     Raises:
         MapFormatError: the map cannot be used with ``config``.
     """
+    require_templates(state, what=what)
     flat = config.to_flat() if hasattr(config, "to_flat") else dict(config)
     ty, tx = int(flat.get("template_y_size", 1)), int(flat.get("template_x_size", 1))
     if (
@@ -733,8 +745,23 @@ def _np(v: Any) -> np.ndarray:
 
 def state_from_slam(slam: Any) -> MapState:
     """The complete state of a running ``RatSLAM`` (or ``MultiSessionRatSLAM``) as a
-    :class:`MapState` (from each module's ``get_state()``)."""
-    slam = getattr(slam, "slam", slam)
+    :class:`MapState` (from each module's ``get_state()``).
+
+    Raises:
+        MapFormatError: a module has no ``get_state`` / ``set_state``
+            (:class:`torchratslam.protocols.Stateful`).
+    """
+    from torchratslam.pipeline import RatSLAM
+    from torchratslam.protocols import Stateful
+
+    slam = slam if isinstance(slam, RatSLAM) else slam.slam  # a multisession wrapper
+    stages = {"local view": slam.local_view, "pose cells": slam.pose_cells}
+    for label, module in {**stages, "experience map": slam.experience_map}.items():
+        if not isinstance(module, Stateful):
+            raise MapFormatError(
+                f"the {label} ({type(module).__name__}) has no get_state()/set_state(), "
+                "so its map cannot be saved"
+            )
     lv = slam.local_view.get_state()
     pc = slam.pose_cells.get_state()
     em = slam.experience_map.get_state()
@@ -786,10 +813,9 @@ def state_from_slam(slam: Any) -> MapState:
     _split_extras("lv", lv, _LV_KNOWN, state)
     _split_extras("pc", pc, _PC_KNOWN, state)
     _split_extras("em", em, _EM_KNOWN, state)
-    odo = getattr(slam, "odometry", None)
-    if odo is not None and hasattr(odo, "get_state"):
-        _split_extras("vo", odo.get_state(), set(), state)
-    state.scalars["slam.last_t"] = float(getattr(slam, "_last_t", 0.0))
+    if isinstance(slam.odometry, Stateful):
+        _split_extras("vo", slam.odometry.get_state(), set(), state)
+    state.scalars["slam.last_t"] = float(slam._last_t)
     return state.validate(source="running map")
 
 
@@ -806,7 +832,10 @@ def apply_state(state: MapState, slam: Any, *, exp_ids: np.ndarray | None = None
     Raises:
         MapFormatError: the map is incompatible with the slam's config.
     """
-    slam = getattr(slam, "slam", slam)
+    from torchratslam.pipeline import RatSLAM
+    from torchratslam.protocols import Stateful
+
+    slam = slam if isinstance(slam, RatSLAM) else slam.slam  # a multisession wrapper
     state = conform(state, slam.config)
     lv = _collect("lv", state)
     lv.update(
@@ -819,9 +848,10 @@ def apply_state(state: MapState, slam: Any, *, exp_ids: np.ndarray | None = None
             "template_shape": np.asarray(state.templates.shape[1:], np.int64),
         }
     )
-    lv.setdefault("kind", getattr(slam.local_view, "kind", "ratslam"))
-    lv_module = __import__(type(slam.local_view).__module__, fromlist=["STATE_VERSION"])
-    lv.setdefault("version", getattr(lv_module, "STATE_VERSION", 1))
+    if not {"kind", "version"} <= lv.keys():  # not saved (an imported map): the module's own
+        own = slam.local_view.get_state()
+        lv.setdefault("kind", own.get("kind", "ratslam"))
+        lv.setdefault("version", own.get("version", 1))
     lv.setdefault("frame_counter", int(state.frame_index))
     pc = _collect("pc", state)
     pc.update(
@@ -847,12 +877,10 @@ def apply_state(state: MapState, slam: Any, *, exp_ids: np.ndarray | None = None
     slam.local_view.set_state(lv)
     slam.pose_cells.set_state(pc)
     slam.experience_map.set_state(em)
-    odo = getattr(slam, "odometry", None)
     vo = _collect("vo", state)
-    if odo is not None and hasattr(odo, "set_state") and vo:
-        odo.set_state(vo)
+    if isinstance(slam.odometry, Stateful) and vo:
+        slam.odometry.set_state(vo)
     slam.frame_index = int(state.frame_index)
-    if hasattr(slam, "_last_t"):
-        slam._last_t = float(state.scalars.get("slam.last_t", 0.0))
-    if exp_ids is not None and hasattr(slam, "remap_experiences"):
+    slam._last_t = float(state.scalars.get("slam.last_t", 0.0))
+    if exp_ids is not None:
         slam.remap_experiences(np.asarray(exp_ids, np.int64))

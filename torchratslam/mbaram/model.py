@@ -35,6 +35,7 @@ and odometry in, node out) is registered as ``"mbaram"`` in
 :data:`torchratslam.registry.RANGE_MAPPERS`, and :func:`run_mbaram` builds its mapper
 from that registry by name.
 
+
 Example:
     >>> import torch
     >>> from torchratslam.mbaram.model import MBARAM, MBARAMParams
@@ -57,6 +58,7 @@ import numpy as np
 import torch
 
 from torchratslam.graph.errors import ConfigError, InputError, MapFormatError
+from torchratslam.graph.geometry import odometry_step, wrap_angle
 from torchratslam.graph.params import Params, param
 from torchratslam.messages import Frame
 from torchratslam.registry import RANGE_MAPPERS
@@ -154,10 +156,6 @@ class MatchResult:
     best: int = -1
 
 
-def _wrap(a: torch.Tensor) -> torch.Tensor:
-    return torch.remainder(a + math.pi, 2.0 * math.pi) - math.pi
-
-
 class _Channel:
     """Node storage of one channel, with room that doubles as nodes are added."""
 
@@ -195,7 +193,7 @@ class _Channel:
     def diff(self, x: torch.Tensor, n: int) -> torch.Tensor:
         d = x - self.mean[:n]
         if self.has_ang:
-            d = torch.where(self.ang, _wrap(d), d)
+            d = torch.where(self.ang, wrap_angle(d), d)
         return d
 
     def maha(self, d: torch.Tensor, n: int) -> torch.Tensor:
@@ -504,7 +502,7 @@ class MBARAM:
         s2 = self.params.sigma_init_sq
         for k, ch in self._ch.items():
             v = x[k]
-            ch.mean[j] = torch.where(ch.ang, _wrap(v), v) if ch.has_ang else v
+            ch.mean[j] = torch.where(ch.ang, wrap_angle(v), v) if ch.has_ang else v
             if ch.full:
                 ch.cov[j] = s2 * torch.eye(ch.dim, dtype=self.dtype, device=self.device)
                 ch.chol[j] = math.sqrt(s2) * torch.eye(ch.dim, dtype=self.dtype, device=self.device)
@@ -526,10 +524,10 @@ class MBARAM:
             floor = ch.floor
             d = x[k] - ch.mean[j]
             if ch.has_ang:
-                d = torch.where(ch.ang, _wrap(d), d)
+                d = torch.where(ch.ang, wrap_angle(d), d)
             mu = ch.mean[j] + b * d  # Eq. 9
             if ch.has_ang:
-                mu = torch.where(ch.ang, _wrap(mu), mu)
+                mu = torch.where(ch.ang, wrap_angle(mu), mu)
             dn = a * d  # x - mu_new
             if ch.full:
                 cov = a * ch.cov[j] + b * torch.outer(dn, dn)  # Eq. 10 (full)
@@ -563,12 +561,11 @@ class MBARAM:
         nu, nv = self.graph.nodes[u], self.graph.nodes[v]
         dx, dy = nv["x"] - nu["x"], nv["y"] - nu["y"]
         angle = math.atan2(dy, dx)
-        wrap = lambda t: math.remainder(t, 2.0 * math.pi)  # noqa: E731
         self.graph.edges[u, v].update(
             d=math.hypot(dx, dy),
             angle=angle,
-            heading=wrap(angle - nu["th"]),
-            facing=wrap(nv["th"] - nu["th"]),
+            heading=wrap_angle(angle - nu["th"]),
+            facing=wrap_angle(nv["th"] - nu["th"]),
         )
 
     def _link(self, prev: int, node: int) -> None:
@@ -658,10 +655,7 @@ class OdometryIntegrator:
 
     def step(self, vtrans: float, vrot: float, dt: float) -> tuple[float, float, float]:
         """Advance by one interval (turn half, move, turn half) and return the pose."""
-        x, y, th = self.pose
-        mid = th + 0.5 * vrot * dt
-        x, y = x + vtrans * dt * math.cos(mid), y + vtrans * dt * math.sin(mid)
-        self.pose = (x, y, math.remainder(th + vrot * dt, 2.0 * math.pi))
+        self.pose = odometry_step(self.pose, vtrans, vrot, dt, midpoint=True)
         return self.pose
 
 
@@ -849,6 +843,76 @@ class MBARAMMapper:
         return self.model.localise(x, None if odometry else LASER_CHANNELS).node
 
 
+def _true_pose(mapper: Any, f: Frame) -> Sequence[float]:
+    return f.pose if f.pose is not None else mapper.inputs(f)[1]
+
+
+def _learn(
+    mapper: Any, map_laps: Sequence[Iterable[Frame]], *, keep: bool
+) -> tuple[np.ndarray, np.ndarray, list[int], list]:
+    """Learn the map lap by lap.
+
+    Returns:
+        The true positions ``(F, 2)``, the winning node of every frame ``(F,)``, the
+        nodes added per lap and (``keep``) the frames for a replay.
+    """
+    path, winners, per_lap, replay = [], [], [], []
+    for lap in map_laps:
+        before = len(mapper)
+        for f in lap:
+            winners.append(mapper.learn(f))
+            path.append(_true_pose(mapper, f)[:2])
+            if keep:
+                replay.append((0, f))
+        per_lap.append(len(mapper) - before)
+    if not winners:
+        raise InputError("MBARAM got no frames to map")
+    return np.asarray(path, float), np.asarray(winners), per_lap, replay
+
+
+def _node_positions(n: int, path: np.ndarray, winners: np.ndarray) -> np.ndarray:
+    """Each node's place in the true frame: the mean true position of the frames it won
+    (its odometry-channel mean when the odometry is the ground truth).
+
+    Shape:
+        path: ``(F, 2)``; winners: ``(F,)``; returns ``(n, 2)``.
+    """
+    node_xy = np.zeros((n, 2))
+    np.add.at(node_xy, winners, path)
+    node_xy /= np.maximum(np.bincount(winners, minlength=n), 1)[:, None]
+    return node_xy
+
+
+def _localise(
+    mapper: Any, node_xy: np.ndarray, replay: list
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Localise every replayed frame with all channels and with the lasers only.
+
+    Returns:
+        True positions ``(L, 2)``, lap of each ``(L,)``, and the positions of the
+        winning nodes with and without odometry ``(L, 2)`` (NaN where none won).
+    """
+    loc_true, loc_lap, with_xy, without_xy = [], [], [], []
+    nan2 = np.array([np.nan, np.nan])
+    for i, f in replay:
+        loc_lap.append(i)
+        node = mapper.localise(f)
+        loc_true.append(_true_pose(mapper, f)[:2])
+        with_xy.append(node_xy[node] if node >= 0 else nan2)
+        node = mapper.localise(f, odometry=False)
+        without_xy.append(node_xy[node] if node >= 0 else nan2)
+    return (
+        np.asarray(loc_true, float).reshape(-1, 2),
+        np.asarray(loc_lap, np.int64),
+        np.reshape(with_xy, (-1, 2)),
+        np.reshape(without_xy, (-1, 2)),
+    )
+
+
+def _rate(ok: np.ndarray) -> float:
+    return float(ok.mean()) if len(ok) else float("nan")
+
+
 def run_mbaram(
     map_laps: Sequence[Iterable[Frame]],
     loc_laps: Sequence[Iterable[Frame]] = (),
@@ -878,62 +942,30 @@ def run_mbaram(
         localisation_rate_without_odometry and their per-lap values.
     """
     params = params if params is not None else MBARAMParams()
-    mapping = RANGE_MAPPERS.get(mapper)(params, odometry=odometry, dtype=dtype)
+    mapping = RANGE_MAPPERS.build(mapper, params, odometry=odometry, dtype=dtype)
     model = mapping.model
-    mapping.keep_inputs = not loc_laps
-
-    def true_pose(f: Frame) -> Sequence[float]:
-        return f.pose if f.pose is not None else mapping.inputs(f)[1]
-
-    path, winners, per_lap, replay = [], [], [], []
-    for lap in map_laps:
-        before = len(mapping)
-        for f in lap:
-            winners.append(mapping.learn(f))
-            path.append(true_pose(f)[:2])
-            if not loc_laps:
-                replay.append((0, f))
-        per_lap.append(len(mapping) - before)
-    if not winners:
-        raise InputError("MBARAM got no frames to map")
-    path_a, win_a = np.asarray(path, float), np.asarray(winners)
-    # each node's place in the true frame: the mean true position of the frames it won
-    # (its odometry-channel mean when the odometry is the ground truth)
-    node_xy = np.zeros((len(model), 2))
-    np.add.at(node_xy, win_a, path_a)
-    node_xy /= np.maximum(np.bincount(win_a, minlength=len(model)), 1)[:, None]
+    if isinstance(mapping, MBARAMMapper):
+        mapping.keep_inputs = not loc_laps  # the replay reuses the mapping frames' inputs
+    path_a, win_a, per_lap, replay = _learn(mapping, map_laps, keep=not loc_laps)
+    node_xy = _node_positions(len(model), path_a, win_a)
     qe_m = float(np.linalg.norm(path_a - node_xy[win_a], axis=1).mean())
-
     if loc_laps:
         replay = [(i, f) for i, lap in enumerate(loc_laps) for f in lap]
-    loc_true, loc_lap, with_xy, without_xy = [], [], [], []
-    nan2 = np.array([np.nan, np.nan])
-    for i, f in replay:
-        loc_lap.append(i)
-        node = mapping.localise(f)
-        loc_true.append(true_pose(f)[:2])
-        with_xy.append(node_xy[node] if node >= 0 else nan2)
-        node = mapping.localise(f, odometry=False)
-        without_xy.append(node_xy[node] if node >= 0 else nan2)
-    loc_true_a = np.asarray(loc_true, float).reshape(-1, 2)
-    loc_lap_a = np.asarray(loc_lap, np.int64)
+    loc_true_a, loc_lap_a, with_xy, without_xy = _localise(mapping, node_xy, replay)
     thr = params.loc_threshold
-    ok_with = localisation_success(np.reshape(with_xy, (-1, 2)), loc_true_a, thr)
-    ok_without = localisation_success(np.reshape(without_xy, (-1, 2)), loc_true_a, thr)
-
-    def rate(ok: np.ndarray) -> float:
-        return float(ok.mean()) if len(ok) else float("nan")
-
-    laps_seen = sorted(set(loc_lap))
+    ok_with = localisation_success(with_xy, loc_true_a, thr)
+    ok_without = localisation_success(without_xy, loc_true_a, thr)
+    rate = _rate
+    laps_seen = sorted(set(loc_lap_a.tolist()))
     metrics = {
         "nodes": len(model),
         "edges": model.num_edges,
-        "frames": len(winners),
+        "frames": len(win_a),
         "qe": quantisation_error(path_a, node_xy[win_a]),
         "qe_m": qe_m,
-        "cr": compression_ratio(len(winners), len(model)),
+        "cr": compression_ratio(len(win_a), len(model)),
         "nodes_per_lap": per_lap,
-        "localisation_frames": len(loc_true),
+        "localisation_frames": len(loc_true_a),
         "localisation_rate_with_odometry": rate(ok_with),
         "localisation_rate_without_odometry": rate(ok_without),
         "localisation_per_lap_with_odometry": [rate(ok_with[loc_lap_a == i]) for i in laps_seen],

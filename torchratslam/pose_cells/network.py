@@ -56,6 +56,7 @@ from torch import nn
 
 from torchratslam.config import PoseCellParams
 from torchratslam.graph.errors import ConfigError, InputError, MapFormatError
+from torchratslam.graph.geometry import pc_distance
 from torchratslam.graph.messages import Action, ActionKind
 from torchratslam.messages import ViewMatch
 from torchratslam.registry import POSE_CELLS
@@ -119,22 +120,6 @@ def _ring_matrix(kernel: np.ndarray, n: int, circular: bool) -> np.ndarray:
             ok = (q >= 0) & (q < n)
             m[p[ok], q[ok]] += w
     return m
-
-
-def pc_distance(a: Any, b: Any, dims: tuple[int, int, int]) -> np.ndarray:
-    """Wrap-aware pose-cell distance: per axis the shorter way round, then Euclidean.
-
-    Args:
-        a, b: pose-cell coordinates ``(x, y, th)`` in cells (broadcastable).
-        dims: ring sizes ``(X, Y, TH)``.
-
-    Shape:
-        a, b: ``(..., 3)``; returns ``(...)``.
-    """
-    d = np.abs(np.asarray(a, dtype=np.float64) - np.asarray(b, dtype=np.float64))
-    n = np.asarray(dims, dtype=np.float64)
-    d = np.minimum(d, n - d)
-    return np.sqrt((d * d).sum(axis=-1))
 
 
 def _minimal_arcs(occ: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -44,6 +44,7 @@ import cv2
 import numpy as np
 
 from torchratslam.graph.errors import InputError
+from torchratslam.graph.geometry import wrap_angle
 from torchratslam.messages import Frame
 
 __all__ = [
@@ -132,7 +133,7 @@ def _pose_at(gt: np.ndarray | None, t: float) -> tuple[float, float, float] | No
     x = float(np.interp(t, gt[:, 0], gt[:, 1]))
     y = float(np.interp(t, gt[:, 0], gt[:, 2]))
     th = float(np.interp(t, gt[:, 0], np.unwrap(gt[:, 3])))
-    return x, y, math.atan2(math.sin(th), math.cos(th))
+    return x, y, wrap_angle(th, include_pi=True)
 
 
 def _frames_from_arrays(

@@ -35,11 +35,14 @@ Example:
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
+import torch
+from torch import nn
 
 from torchratslam.config import VisualOdometryParams
-from torchratslam.graph.errors import InputError
+from torchratslam.graph.errors import InputError, MapFormatError
 from torchratslam.messages import Frame
 
 __all__ = ["GivenOdometry", "VisualOdometry", "best_shift", "intensity_profile"]
@@ -111,8 +114,14 @@ def best_shift(profile: np.ndarray, previous: np.ndarray, max_shift: int = 40) -
     return shift, float(diffs[i])
 
 
-class VisualOdometry:
+class VisualOdometry(nn.Module):
     """OpenRatSLAM's intensity-profile visual odometry (an odometry source).
+
+    A ``torch.nn.Module`` without parameters: the profiles are computed in numpy
+    float64 whatever ``.to()`` / ``.double()`` / ``.float()`` ask (as for any module
+    without floating tensors, they change nothing); ``state_dict()`` holds the previous
+    image's profiles (the whole state) as CPU tensors under ``_extra_state`` and
+    ``load_state_dict`` restores them, so the next frame gives the same odometry.
 
     Args:
         params: the ``vtrans_*``, ``vrot_*``, ``camera_fov_deg``, ``camera_hz``,
@@ -130,6 +139,7 @@ class VisualOdometry:
         max_shift: int = 40,
         mirrored: bool = False,
     ) -> None:
+        super().__init__()
         self.params = params if params is not None else VisualOdometryParams()
         self.max_shift = int(max_shift)
         self.mirrored = bool(mirrored)
@@ -179,8 +189,8 @@ class VisualOdometry:
         vtrans = min(trans_diff * p.vtrans_scaling, p.vtrans_max)
         return float(vtrans), float(vrot)
 
-    def __call__(self, frame: Frame) -> tuple[float, float, float]:
-        """Odometry-source interface: ``(vtrans, vrot, dt)`` for one frame.
+    def forward(self, frame: Frame) -> tuple[float, float, float]:
+        """Odometry-source interface (``module(frame)``): ``(vtrans, vrot, dt)`` for one frame.
 
         ``dt`` is the frame's own interval when the reader knows it, else
         ``1 / camera_hz``; it is 0 for the first frame.
@@ -197,8 +207,21 @@ class VisualOdometry:
         return {"prev_trans": self._prev_trans, "prev_rot": self._prev_rot}
 
     def set_state(self, state: dict) -> None:
+        """Restore :meth:`get_state`'s output."""
         self._prev_trans = state.get("prev_trans")
         self._prev_rot = state.get("prev_rot")
+
+    def get_extra_state(self) -> dict:
+        """:meth:`get_state` with the profiles as CPU float64 tensors (for ``state_dict()``)."""
+        return {k: None if v is None else torch.from_numpy(v) for k, v in self.get_state().items()}
+
+    def set_extra_state(self, state: Any) -> None:
+        """Restore :meth:`get_extra_state`'s output (``load_state_dict()``)."""
+        if not isinstance(state, dict):
+            raise MapFormatError(f"visual odometry state_dict entry is a {type(state).__name__}")
+        self.set_state(
+            {k: None if v is None else np.asarray(v.numpy(), np.float64) for k, v in state.items()}
+        )
 
 
 class GivenOdometry:

@@ -14,7 +14,7 @@ Example:
 
 from torchratslam.sim.dataset import open_sim, parse_sim_spec, write_dataset
 from torchratslam.sim.laser import Laser, scan
-from torchratslam.sim.motion import OdometryNoise, Route, integrate_odometry, odometry_from_poses
+from torchratslam.sim.motion import OdometryNoise, Route, odometry_from_poses
 from torchratslam.sim.render import Camera, cast_rays, render
 from torchratslam.sim.tours import TOURS, Session, Tour, get_tour
 from torchratslam.sim.world import World, WorldBuilder
@@ -31,7 +31,6 @@ __all__ = [
     "WorldBuilder",
     "cast_rays",
     "get_tour",
-    "integrate_odometry",
     "odometry_from_poses",
     "open_sim",
     "parse_sim_spec",

@@ -3,7 +3,8 @@
 Ground truth and odometry are consistent by construction: the heading at frame ``k``
 is the direction of travel from frame ``k-1`` to ``k`` (frame 0 takes frame 1's), and
 the odometry of the interval ending at frame ``k`` integrates back exactly with the
-rotate-then-translate rule used by OpenRatSLAM's experience map::
+rotate-then-translate rule used by OpenRatSLAM's experience map
+(:func:`torchratslam.graph.geometry.dead_reckoning`)::
 
     th_k = th_{k-1} + vrot_k * dt_k
     x_k  = x_{k-1}  + vtrans_k * dt_k * cos(th_k)
@@ -22,12 +23,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from torchratslam.graph.errors import InputError
+from torchratslam.graph.geometry import wrap_angle
 
-__all__ = ["OdometryNoise", "Route", "integrate_odometry", "odometry_from_poses"]
-
-
-def _wrap(a: np.ndarray) -> np.ndarray:
-    return (np.asarray(a) + np.pi) % (2 * np.pi) - np.pi
+__all__ = ["OdometryNoise", "Route", "odometry_from_poses"]
 
 
 class Route:
@@ -182,7 +180,7 @@ def odometry_from_poses(
         raise InputError("frame intervals must be positive")
     d = np.diff(poses, axis=0)
     out[1:, 0] = np.hypot(d[:, 0], d[:, 1]) / dts[1:]
-    out[1:, 1] = _wrap(d[:, 2]) / dts[1:]
+    out[1:, 1] = wrap_angle(d[:, 2]) / dts[1:]
     if noise is not None:
         rng = rng or np.random.default_rng(0)
         n = t - 1
@@ -193,19 +191,3 @@ def odometry_from_poses(
             out[1:, 1] * (1 + noise.rot_scale_error) + noise.heading_bias + noise.rot_noise * gw
         )
     return out
-
-
-def integrate_odometry(
-    odometry: np.ndarray, start: tuple[float, float, float] = (0.0, 0.0, 0.0)
-) -> np.ndarray:
-    """Dead reckoning: integrate ``[vtrans, vrot, dt]`` rows (rotate, then translate).
-
-    Shape:
-        odometry ``(T, 3)`` -> poses ``(T, 3)`` ``[x, y, th]`` (row 0 = ``start``).
-    """
-    odo = np.asarray(odometry, np.float64)
-    th = start[2] + np.cumsum(odo[:, 1] * odo[:, 2])
-    step = odo[:, 0] * odo[:, 2]
-    x = start[0] + np.cumsum(step * np.cos(th))
-    y = start[1] + np.cumsum(step * np.sin(th))
-    return np.column_stack([x, y, _wrap(th)])

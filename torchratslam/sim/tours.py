@@ -43,12 +43,12 @@ from typing import Any
 import numpy as np
 
 from torchratslam.graph.errors import InputError, unknown_name_message
+from torchratslam.graph.geometry import dead_reckoning, wrap_angle
 from torchratslam.messages import Frame
 from torchratslam.sim.laser import Laser, scan
 from torchratslam.sim.motion import (
     OdometryNoise,
     Route,
-    integrate_odometry,
     odometry_from_poses,
     poses_along,
 )
@@ -216,7 +216,7 @@ class Session:
         out = np.empty_like(self.poses)
         starts = [0, *np.flatnonzero(self.odometry[1:, 2] == 0) + 1, len(self)]
         for a, b in itertools.pairwise(starts):
-            out[a:b] = integrate_odometry(self.odometry[a:b], tuple(self.poses[a]))
+            out[a:b] = dead_reckoning(*self.odometry[a:b].T, start=tuple(self.poses[a]))
         return out
 
     def subset(self, start: int = 0, stop: int | None = None) -> Session:
@@ -674,7 +674,7 @@ def _assemble(name: str, b: _Build, o: _Opts, seed: int, options: dict) -> Tour:
     bridges = []
     if b.bridges:
         max_turn = max(
-            float(np.abs(_wrap(np.diff(ses.poses[:, 2]))).max(initial=0.0)) for ses in sessions
+            float(np.abs(wrap_angle(np.diff(ses.poses[:, 2]))).max(initial=0.0)) for ses in sessions
         )
         max_turn = max(1.5 * max_turn, 0.05)  # never turns much faster than the sessions
         for i, legs in enumerate(b.bridges):
@@ -695,10 +695,6 @@ def _assemble(name: str, b: _Build, o: _Opts, seed: int, options: dict) -> Tour:
         noise=b.noise,
         seed=seed,
     )
-
-
-def _wrap(a: np.ndarray | float) -> np.ndarray:
-    return (np.asarray(a) + np.pi) % (2 * np.pi) - np.pi
 
 
 def _legs_path(
@@ -759,7 +755,7 @@ def _bridge_poses(
 
     def turn_to(target: float) -> None:
         nonlocal th
-        dth = float(_wrap(target - th))
+        dth = float(wrap_angle(target - th))
         n_rot = math.ceil(abs(dth) / max_turn - 1e-9) - 1
         for j in range(1, n_rot + 1):
             out.append((x, y, th + dth * j / (n_rot + 1)))
@@ -777,7 +773,7 @@ def _bridge_poses(
             out.append((x, y, th))
     turn_to(th0)  # the next session's first frame makes the last turn
     poses = np.array(out, np.float64).reshape(-1, 3)
-    poses[:, 2] = _wrap(poses[:, 2])
+    poses[:, 2] = wrap_angle(poses[:, 2])
     return poses
 
 

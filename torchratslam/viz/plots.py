@@ -26,7 +26,7 @@ from matplotlib.collections import LineCollection
 
 from torchratslam.eval.metrics import align_se2
 
-__all__ = ["plot_map", "plot_pose_cells", "save_figure"]
+__all__ = ["draw_icp_overlay", "plot_map", "plot_pose_cells", "save_figure"]
 
 
 def save_figure(fig: Any, path: str | Path, dpi: int = 110) -> Path:
@@ -103,7 +103,8 @@ def plot_map(
         tr = np.asarray(trajectory_xy, dtype=np.float64)[:, :2]
         ok = np.all(np.isfinite(gt), 1) & np.all(np.isfinite(tr), 1)
         if ok.sum() >= 2:
-            rot, t = align_se2(gt[ok], tr[ok])
+            fit = align_se2(gt[ok], tr[ok])
+            rot, t = fit.rotation, fit.translation
             g = gt @ rot.T + t
             ax.plot(g[:, 0], g[:, 1], color="0.6", lw=1.0, label="ground truth (aligned)", zorder=1)
     segs = _world_segments(world) if world is not None else None
@@ -170,3 +171,27 @@ def plot_pose_cells(
         ax.set_title(name, fontsize=9)
     fig.suptitle(f"{title} (TH, Y, X) = {tuple(a.shape)}")
     return save_figure(fig, path)
+
+
+def draw_icp_overlay(
+    ax: Any,
+    fixed: np.ndarray,
+    moved_aligned: np.ndarray,
+    *,
+    fixed_label: str,
+    moved_label: str,
+    mse_m2: float,
+) -> None:
+    """The paper's Fig. 10 on ``ax``: the fixed map (purple) and the ICP-aligned moved map
+    (orange), axes in metres, legend, the LibICP residual in the title.
+
+    Shape:
+        fixed: ``(M, 2|3)``; moved_aligned: ``(N, 2|3)``.
+    """
+    ax.scatter(fixed[:, 0], fixed[:, 1], s=9, color="tab:purple", label=fixed_label)
+    ax.scatter(moved_aligned[:, 0], moved_aligned[:, 1], s=4, color="tab:orange", label=moved_label)
+    ax.set_xlabel("x (m)")
+    ax.set_ylabel("y (m)")
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.legend(loc="best", fontsize=8)
+    ax.set_title(f"ICP comparison: LibICP residual {mse_m2:.6g} m$^2$", fontsize=9)

@@ -103,7 +103,7 @@ def test_compare_backends_on_a_saved_state_and_a_g2o_file(run_out, tmp_path, cap
 
     from torchratslam.graph.io import write_g2o
 
-    from torchratslam.cli.compare_backends import load_posegraph
+    from torchratslam.experiments.compare_backends import load_posegraph
 
     pg = load_posegraph(out / "state")
     g2o = tmp_path / "map.g2o"

@@ -27,8 +27,10 @@ def test_align_se2_recovers_a_known_rigid_motion(angle):
     src = rng.normal(size=(50, 2)) * 5
     t = np.array([3.0, -1.5])
     dst = src @ _rot(angle).T + t
-    rot, tr = align_se2(src, dst)
+    fit = align_se2(src, dst)
+    rot, tr = fit.rotation, fit.translation
     assert np.allclose(rot, _rot(angle), atol=1e-9)
+    assert np.allclose(fit.apply(src), dst, atol=1e-9)
     assert np.allclose(tr, t, atol=1e-9)
     assert ate_rmse(src, dst) == pytest.approx(0.0, abs=1e-9)
     assert ate_rmse(src, dst, align=False) > 1.0
@@ -40,8 +42,8 @@ def test_align_se2_is_the_least_squares_optimum():
     src = rng.normal(size=(30, 2))
     dst = src @ _rot(0.4).T + [1.0, 2.0] + rng.normal(scale=0.2, size=(30, 2))
     best = ate_rmse(src, dst)
-    rot, t = align_se2(src, dst)
-    base = math.atan2(rot[1, 0], rot[0, 0])
+    fit = align_se2(src, dst)
+    t, base = fit.translation, fit.angle
     for da in np.linspace(-0.05, 0.05, 11):
         for dx in np.linspace(-0.05, 0.05, 5):
             moved = src @ _rot(base + da).T + t + [dx, -dx]
@@ -69,7 +71,7 @@ def test_ate_errors_are_clear():
 
 
 def test_apply_se2_rotates_headings():
-    out = apply_se2(np.array([[1.0, 0.0, 0.5]]), _rot(math.pi / 2), np.array([1.0, 1.0]))
+    out = apply_se2(np.array([[1.0, 0.0, 0.5]]), math.pi / 2, np.array([1.0, 1.0]))
     assert np.allclose(out, [[1.0, 2.0, 0.5 + math.pi / 2]])
 
 

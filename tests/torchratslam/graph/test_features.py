@@ -15,14 +15,12 @@ from torchratslam.graph.experience_map import ExperienceMap
 from torchratslam.graph.features import (
     average_transition,
     experience_activity,
-    invert_transition,
     link_confidence,
     peak_experience,
     rotate_link_components,
-    signed_delta_rad,
     temporal_map,
-    wrap_rad,
 )
+from torchratslam.graph.geometry import inverse, signed_delta, wrap_angle
 from torchratslam.graph.messages import Action, ActionKind
 from torchratslam.graph.params import ExperienceMapParams
 
@@ -66,11 +64,15 @@ def make(**kw) -> ExperienceMap:
 # ---------------------------------------------------------------- angles
 def test_wrap_and_signed_delta_match_openratslam_loops():
     a = RNG.uniform(-20, 20, 500)
-    np.testing.assert_allclose(wrap_rad(a), [clip_rad_180(v) for v in a], atol=1e-12)
-    assert wrap_rad(PI) == PI and wrap_rad(-PI) == PI  # (-pi, pi]
+    np.testing.assert_allclose(
+        wrap_angle(a, include_pi=True), [clip_rad_180(v) for v in a], atol=1e-12
+    )
+    assert (
+        wrap_angle(PI, include_pi=True) == PI and wrap_angle(-PI, include_pi=True) == PI
+    )  # (-pi, pi]
     b = RNG.uniform(-20, 20, 500)
     np.testing.assert_allclose(
-        signed_delta_rad(a, b), [clip_rad_180(y - x) for x, y in zip(a, b)], atol=1e-12
+        signed_delta(a, b, include_pi=True), [clip_rad_180(y - x) for x, y in zip(a, b)], atol=1e-12
     )
 
 
@@ -232,13 +234,13 @@ def test_repeated_transitions_are_averaged_into_the_link(averaging):
 
 def test_invert_transition_composes_to_identity():
     t = np.column_stack([RNG.normal(size=50), RNG.normal(size=50), RNG.uniform(-PI, PI, 50)])
-    inv = invert_transition(t)
+    inv = inverse(t, include_pi=True)
     # compose t then inv: x = tx + R(tth) inv_xy must be 0, heading 0
     c, s = np.cos(t[:, 2]), np.sin(t[:, 2])
     x = t[:, 0] + c * inv[:, 0] - s * inv[:, 1]
     y = t[:, 1] + s * inv[:, 0] + c * inv[:, 1]
     np.testing.assert_allclose(
-        np.column_stack([x, y, wrap_rad(t[:, 2] + inv[:, 2])]), 0, atol=1e-12
+        np.column_stack([x, y, wrap_angle(t[:, 2] + inv[:, 2], include_pi=True)]), 0, atol=1e-12
     )
 
 
@@ -269,7 +271,7 @@ def test_relaxation_rotates_outgoing_link_components_by_eq_8():
     before_local = em.link_components("local")
     th_before = em.poses[:, 2].copy()
     em.iterate()
-    dth = wrap_rad(em.poses[:, 2] - th_before)
+    dth = wrap_angle(em.poses[:, 2] - th_before, include_pi=True)
     assert np.abs(dth).max() > 1e-3  # relaxation did rotate experiences
     src = em.links()["src"]
     expected = []

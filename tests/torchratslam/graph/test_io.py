@@ -4,6 +4,7 @@ import gtsam
 import numpy as np
 import pytest
 from torchratslam.graph.errors import InputError, MapFormatError
+from torchratslam.graph.geometry import between, compose, wrap_angle
 from torchratslam.graph.io import (
     CITY_SIGMAS,
     example_file,
@@ -12,7 +13,7 @@ from torchratslam.graph.io import (
     write_g2o,
     write_toro,
 )
-from torchratslam.graph.posegraph import PoseGraph, between, compose, compose_odometry, wrap_angle
+from torchratslam.graph.posegraph import PoseGraph, compose_odometry
 
 
 def _gtsam_reference(path):

@@ -8,7 +8,13 @@ import numpy as np
 import pytest
 
 from torchratslam.errors import GraphError, MapFormatError
-from torchratslam.maps.merge import merge_maps, pc_distance, pick_experience, shift_activity
+from torchratslam.maps.merge import (
+    first_experience,
+    merge_maps,
+    pc_distance,
+    pick_experience,
+    shift_activity,
+)
 from torchratslam.maps.state import MapState
 
 DIMS = (9, 9, 12)  # x, y, th rings
@@ -287,7 +293,10 @@ def test_picks_the_experience_nearest_in_pose_cells():
     loaded.exp_pc[5] = loaded.template_pc[2] + [0.2, 0, 0]
     loaded.exp_pc[2] = np.mod(loaded.template_pc[2] + [3, 0, 0], DIMS)
     assert pick_experience(loaded, 2) == 5
-    assert merge_maps(loaded, partial, 2).info["loaded_exp"] == 5
+    assert merge_maps(loaded, partial, 2, match_exp="nearest").info["loaded_exp"] == 5
+    # the authors' code (the default) merges at the template's first experience
+    assert first_experience(loaded, 2) == 2
+    assert merge_maps(loaded, partial, 2).info["loaded_exp"] == 2
     assert pick_experience(loaded, 99 % loaded.n_templates) in range(loaded.n_experiences)
 
 
@@ -325,7 +334,7 @@ def _cli_maps(tmp_path, *, match=True):
 @pytest.mark.parametrize("fmt", ["native", "reference"])
 def test_cli_merge_writes_the_merged_map(tmp_path, capsys, fmt):
     from torchratslam.cli import main
-    from torchratslam.maps.state import load_state
+    from torchratslam.maps.io import load_state
 
     loaded, partial, cfg = _cli_maps(tmp_path)
     code = main(
@@ -374,3 +383,146 @@ def test_cli_merge_without_a_match_is_an_error_and_writes_nothing(tmp_path, caps
     assert code == 2
     assert "matches no loaded template" in capsys.readouterr().err
     assert not (tmp_path / "m").exists()
+
+
+# ------------------------------------------------ two simulated sessions, authors' arithmetic
+@pytest.fixture(scope="module")
+def two_sessions(tmp_path_factory):
+    """Session 1 of the simulated virtual tour mapped alone; session 2 mapped until its
+    partial map meets session 1's. Both maps written in the authors' format."""
+    import torch
+
+    from torchratslam.config import load_config
+    from torchratslam.maps.reference_format import write_reference
+    from torchratslam.maps.state import state_from_slam
+    from torchratslam.multisession.session import MultiSessionRatSLAM
+    from torchratslam.pipeline import RatSLAM
+    from torchratslam.sim import get_tour
+
+    torch.set_num_threads(1)
+    cfg, tour = load_config("virtual_tour"), get_tour("virtual_tour")
+    slam = RatSLAM(cfg)
+    slam.run(tour.sessions[0].frames(), progress=False)
+    ms = MultiSessionRatSLAM(cfg, [state_from_slam(slam)], session="session2")
+    ms.run(tour.sessions[1].frames(0, 25), progress=False)
+    assert len(ms.merges) == 1
+    d = tmp_path_factory.mktemp("two_sessions")
+    write_reference(state_from_slam(slam), d / "loaded")
+    write_reference(ms.snapshots[0]["partial_state"], d / "partial")
+    return cfg, d, ms.merges[0]
+
+
+def authors_merge(lm, pm, u, rel):
+    """The merge as reference-save-format.md describes the authors' code, in plain loops."""
+    dims = [lm.config["pc_dim_xy"], lm.config["pc_dim_xy"], lm.config["pc_dim_th"]]
+    n_vl, n_vp, n_el, n_ep = lm.n_templates, pm.n_templates, lm.n_experiences, pm.n_experiences
+    z, e_z = n_vp - 1, n_ep - 1  # the partial map's last template and last experience
+    e_u = next(j for j in range(n_el) if lm.exp_template[j] == u)  # u's first experience
+    out = {"e_u": e_u, "templates": [], "t_pc": [], "exps": [], "links": []}
+    for i in range(n_vp - 1):  # templates except the last, ids offset by n_vl
+        out["templates"].append((n_vl + i, pm.templates[i], pm.template_decay[i]))
+        shifted = []
+        for k in range(3):  # the templates' packet difference, modulo the network
+            v = pm.template_pc[i][k] + (lm.template_pc[u][k] - pm.template_pc[z][k])
+            shifted.append(v % dims[k])
+        out["t_pc"].append(shifted)
+    dth = lm.exp_pose[e_u][2] - pm.exp_pose[e_z][2] + rel
+    for j in range(n_ep - 1):
+        x = pm.exp_pose[j][0] - pm.exp_pose[e_z][0]
+        y = pm.exp_pose[j][1] - pm.exp_pose[e_z][1]
+        nx = math.cos(dth) * x - math.sin(dth) * y + lm.exp_pose[e_u][0]
+        ny = math.sin(dth) * x + math.cos(dth) * y + lm.exp_pose[e_u][1]
+        th = pm.exp_pose[j][2] + dth
+        pc = []
+        for k in range(3):  # the matched experiences' difference, modulo the network
+            v = pm.exp_pc[j][k] + (lm.exp_pc[e_u][k] - pm.exp_pc[e_z][k])
+            pc.append(v % dims[k])
+        t = int(pm.exp_template[j])
+        out["exps"].append((nx, ny, th, pc, n_vl + t if t < z else u))
+    for k in range(pm.n_links):
+        ends = []
+        for e in (int(pm.link_from[k]), int(pm.link_to[k])):
+            ends.append(e_u if e == e_z else n_el + e)  # links at e_z re-pointed to e_u
+        geo = (pm.link_d[k], pm.link_heading[k], pm.link_facing[k], pm.link_dt[k])
+        out["links"].append((*ends, *geo))
+    return out
+
+
+def test_merge_of_two_simulated_sessions_is_the_authors_arithmetic(two_sessions):
+    from torchratslam.maps.reference_format import read_reference
+
+    cfg, d, rec = two_sessions
+    lm, pm = read_reference(d / "loaded", cfg), read_reference(d / "partial", cfg)
+    u, rel = rec["loaded_template"], 0.0  # the virtual tour is not panoramic
+    res = merge_maps(lm, pm, u, relative_rad=rel)
+    want, m = authors_merge(lm, pm, u, rel), res.state
+    n_vl, n_el, n_ll = lm.n_templates, lm.n_experiences, lm.n_links
+    assert res.info["loaded_exp"] == want["e_u"]
+    assert res.info["partial_exp"] == pm.n_experiences - 1
+    # the loaded map is kept as it is
+    assert np.array_equal(m.templates[:n_vl], lm.templates)
+    assert np.array_equal(m.template_pc[:n_vl], lm.template_pc)
+    assert np.array_equal(m.exp_pose[:n_el], lm.exp_pose)
+    assert np.array_equal(m.exp_pc[:n_el], lm.exp_pc)
+    assert np.array_equal(m.link_from[:n_ll], lm.link_from)
+    # templates, field by field
+    assert m.n_templates == n_vl + len(want["templates"])
+    for i, (tid, data, decay) in enumerate(want["templates"]):
+        assert np.array_equal(m.templates[tid], data) and m.template_decay[tid] == decay
+        assert m.template_pc[tid].tolist() == pytest.approx(want["t_pc"][i], abs=1e-12)
+    # experiences, field by field
+    assert m.n_experiences == n_el + len(want["exps"])
+    for j, (x, y, th, pc, t) in enumerate(want["exps"]):
+        e = n_el + j
+        assert m.exp_pose[e, :2].tolist() == pytest.approx([x, y], abs=1e-12)
+        assert abs(wrap(m.exp_pose[e, 2] - th)) < 1e-12
+        assert m.exp_pc[e].tolist() == pytest.approx(pc, abs=1e-12)
+        assert m.exp_template[e] == t
+    # links, field by field
+    assert m.n_links == n_ll + len(want["links"])
+    for k, (a, b, dd, hh, ff, dt) in enumerate(want["links"]):
+        got = (m.link_from[n_ll + k], m.link_to[n_ll + k], m.link_d[n_ll + k])
+        assert got == (a, b, dd)
+        geo = (m.link_heading[n_ll + k], m.link_facing[n_ll + k], m.link_dt[n_ll + k])
+        assert geo == (hh, ff, dt)
+    # the two shifts really differ here, so the test tells the two readings apart
+    e_u, e_z = want["e_u"], pm.n_experiences - 1
+    exp_delta = lm.exp_pc[e_u] - pm.exp_pc[e_z]
+    tpl_delta = lm.template_pc[u] - pm.template_pc[-1]
+    assert np.abs(exp_delta - tpl_delta).max() > 1e-3
+    single = merge_maps(lm, pm, u, relative_rad=rel, exp_pc_shift="templates").state
+    dims = np.array(pm.pc_dims, np.float64)
+    assert np.allclose(single.exp_pc[n_el:], np.mod(pm.exp_pc[:-1] + tpl_delta, dims))
+    assert np.array_equal(single.template_pc, m.template_pc)
+    assert np.array_equal(single.exp_pose, m.exp_pose)
+
+
+def test_unknown_merge_options_are_errors():
+    loaded, partial, _ = split(np.random.default_rng(1))
+    with pytest.raises(GraphError, match="exp_pc_shift must be one of"):
+        merge_maps(loaded, partial, 2, exp_pc_shift="paper")
+    with pytest.raises(GraphError, match="match_exp must be one of"):
+        merge_maps(loaded, partial, 2, match_exp="last")
+
+
+def test_cli_merge_options_select_the_readings(tmp_path, capsys):
+    from torchratslam.cli import main
+    from torchratslam.config import load_config
+    from torchratslam.maps.io import load_state
+
+    loaded, partial, cfg = _cli_maps(tmp_path)
+    loaded.exp_template[5] = 2  # template 2 has experiences 2 and 5; 5 is nearer
+    loaded.exp_pc[5] = loaded.template_pc[2] + [0.2, 0, 0]
+    loaded.exp_pc[2] = np.mod(loaded.template_pc[2] + [3, 0, 0], DIMS)
+    from torchratslam.maps.state import save_map
+
+    save_map(loaded, tmp_path / "loaded2")
+    args = ["merge", "--config", str(cfg), "--loaded", str(tmp_path / "loaded2")]
+    args += ["--partial", str(tmp_path / "partial")]
+    for opts, e_u in (([], 2), (["--match-exp", "nearest", "--exp-pc-shift", "templates"], 5)):
+        out = tmp_path / f"m{e_u}"
+        assert main([*args, "--out", str(out), *opts]) == 0
+        assert f'"loaded_exp": {e_u}' in capsys.readouterr().out
+        kw = {"match_exp": "nearest", "exp_pc_shift": "templates"} if opts else {}
+        want = merge_maps(loaded, partial, 2, **kw).state
+        assert np.array_equal(load_state(out, load_config(cfg)).exp_pc, want.exp_pc)

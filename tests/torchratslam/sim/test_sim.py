@@ -10,6 +10,7 @@ import cv2
 import numpy as np
 import pytest
 from torchratslam.graph.errors import InputError
+from torchratslam.graph.geometry import dead_reckoning
 
 from torchratslam.cli import main as cli_main
 from torchratslam.sim import (
@@ -19,7 +20,6 @@ from torchratslam.sim import (
     World,
     WorldBuilder,
     get_tour,
-    integrate_odometry,
     odometry_from_poses,
     open_sim,
     render,
@@ -215,7 +215,7 @@ def test_odometry_noise_drifts_by_the_configured_amounts():
     o = odometry_from_poses(poses, dt, OdometryNoise(heading_bias=bias))
     drift = (o[:, 1] * o[:, 2]).sum() - true_rot
     assert drift == pytest.approx(bias * dt * (len(poses) - 1), rel=1e-9)
-    dr = integrate_odometry(o, tuple(poses[0]))
+    dr = dead_reckoning(*o.T, start=tuple(poses[0]))
     assert wrap(dr[-1, 2] - poses[-1, 2]) == pytest.approx(wrap(drift), abs=1e-9)
     # rotation scale error
     o = odometry_from_poses(poses, dt, OdometryNoise(rot_scale_error=-0.02))

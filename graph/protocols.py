@@ -1,0 +1,72 @@
+"""Typed interfaces of the torch-free pluggable stages: the experience map and the
+relaxation backend it calls.
+
+They are ``runtime_checkable`` so that code handed a module can check it with
+``isinstance`` (which tests that the named methods and attributes exist) instead of
+probing attribute by attribute; the torch-side stages are in
+:mod:`torchratslam.protocols`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any, Protocol, runtime_checkable
+
+import numpy as np
+from torchratslam.graph.messages import Action
+from torchratslam.graph.posegraph import PoseGraph
+
+__all__ = ["ExperienceMapModule", "RelaxationBackend", "Stateful"]
+
+
+@runtime_checkable
+class Stateful(Protocol):
+    """A module whose whole state is a dict of numpy arrays and Python scalars."""
+
+    def get_state(self) -> dict[str, Any]:
+        """Everything needed to resume (arrays and scalars only)."""
+        ...
+
+    def set_state(self, state: Mapping[str, Any]) -> None:
+        """Restore :meth:`get_state`'s output."""
+        ...
+
+
+@runtime_checkable
+class RelaxationBackend(Protocol):
+    """What :meth:`ExperienceMap.iterate` needs from a backend (see
+    ``torchratslam.graph.backends.Backend`` for the full interface)."""
+
+    def relax(self, pg: PoseGraph, *, passes: int, correction: float = 0.5) -> np.ndarray:
+        """Return the relaxed (N, 3) poses of ``pg``."""
+        ...
+
+
+@runtime_checkable
+class ExperienceMapModule(Protocol):
+    """The experience-map stage: odometry in, pose-cell actions in, map out.
+
+    Saving a map also needs :class:`Stateful` (``get_state`` / ``set_state``).
+    """
+
+    current_id: int
+
+    def on_odometry(self, vtrans: float, vrot: float, dt: float) -> None:
+        """Accumulate one interval of odometry."""
+        ...
+
+    def apply(
+        self,
+        action: Action,
+        *,
+        frame: int,
+        t: float,
+        pc: tuple[float, float, float],
+        template_id: int,
+    ) -> Any:
+        """Create, link or jump to an experience as the pose cells' action says."""
+        ...
+
+    def iterate(self) -> Any:
+        """Relax the map (graph correction)."""
+        ...

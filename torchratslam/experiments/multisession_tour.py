@@ -1,0 +1,650 @@
+"""Multisession versus single-session mapping of a simulated tour (the multisession
+paper's experiments, Section 5): the runner behind ``torchratslam multisession`` and the
+demo.
+
+* :func:`run_sessions` maps sessions one after another, each starting with the maps the
+  previous ones left, merging when they meet (:class:`MultiSessionRatSLAM`);
+* :func:`run_tour` runs the single-session references and the multisession mapping of a
+  tour and compares them (the ``report`` of ``report.json``);
+* :func:`report_markdown` renders the report as tables;
+* :func:`run_experiment` does all of it for a tour name and writes ``OUT``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import os
+import tempfile
+import time
+from collections.abc import Iterable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from torchratslam.config import RatSLAMConfig, load_config
+from torchratslam.eval.icp import PAPER_ICP_MSE_M2
+from torchratslam.graph.errors import InputError
+from torchratslam.maps.state import MapState
+from torchratslam.multisession.session import MultiSessionRatSLAM
+from torchratslam.pipeline import RatSLAM
+from torchratslam.protocols import FrameSource
+
+__all__ = [
+    "PAPER_ICP_RMSE",
+    "TOUR_CONFIG",
+    "report_markdown",
+    "run_experiment",
+    "run_sessions",
+    "run_tour",
+]
+
+PAPER_ICP_RMSE = PAPER_ICP_MSE_M2  # old name: the paper prints "RMSE", but its figures are
+# LibICP residuals, mean squared distances in m^2 (torchratslam.eval.icp)
+"""ICP RMSE between the multisession and single-session maps in the paper (Figs. 10, 14,
+16; units as printed there)."""
+
+TOUR_CONFIG = {"virtual_tour": "virtual_tour", "lab_tour": "lab_tour", "irat_like": "irat"}
+"""The shipped config of each tour, used unmodified when no config is given."""
+
+_METRIC_KEYS = ("error", "initial_error", "ate_rmse_m", "time_s")
+
+
+# ------------------------------------------------------------------ small helpers
+def _shifted(frames: Iterable[Any], dt: float) -> Iterable[Any]:
+    for f in frames:
+        yield dataclasses.replace(f, t=float(f.t) + dt)
+
+
+def _map_metrics(state: MapState, gt: np.ndarray | None) -> dict[str, Any]:
+    """Counts and the experience ATE: every experience's final position against the
+    ground truth at its creation time, after rigid SE(2) alignment."""
+    from torchratslam.eval.metrics import ate_rmse, interpolate_groundtruth
+
+    out: dict[str, Any] = dict(state.summary())
+    out["ate_rmse_m"] = None
+    if gt is not None and state.n_experiences >= 2:
+        truth = interpolate_groundtruth(gt, state.exp_t)
+        out["ate_rmse_m"] = float(ate_rmse(state.exp_pose[:, :2], truth[:, :2]))
+    return out
+
+
+def _posegraph(state: MapState, config: RatSLAMConfig) -> Any:
+    from torchratslam.graph.experience_map import ExperienceMap
+    from torchratslam.maps.state import experience_map_state
+
+    em = ExperienceMap(config.experience_map)
+    em.set_state(experience_map_state(state))
+    return em.posegraph("creation")
+
+
+def _graph_error(state: MapState, config: RatSLAMConfig) -> float:
+    from torchratslam.graph.backends import GraphErrorEvaluator
+
+    pg = _posegraph(state, config)
+    return float(GraphErrorEvaluator(pg)(pg.poses)) if pg.num_edges else 0.0
+
+
+def _relative(n: int, ref: int) -> float | None:
+    return (n - ref) / ref if ref else None
+
+
+# ------------------------------------------------------------------ session by session
+def run_sessions(
+    config: RatSLAMConfig,
+    sessions: list[Any],
+    *,
+    offsets: list[float] | None = None,
+    shift_pose_cells: bool = True,
+    save_dir: Any = None,
+    progress: bool = False,
+    max_frames: int | None = None,
+    **ratslam_kwargs: Any,
+) -> dict[str, Any]:
+    """Map ``sessions`` one after another, each starting with the maps the previous
+    ones left (saved and loaded when ``save_dir`` is given), merging when they meet.
+
+    Args:
+        config: the configuration.
+        sessions: simulator/reader sessions (``name``, ``frames()``) or frame iterables.
+        offsets: seconds added to each session's timestamps (to put every session on
+            one clock for ground-truth look-ups); default 0.
+        shift_pose_cells: False for the Fig. 12 ablation.
+        save_dir: where each session's map is saved (``<dir>/<session>/state``).
+        progress: progress bars.
+        max_frames: frames per session at most (for quick checks).
+
+    Returns:
+        ``maps`` (the maps left, the last one the final), ``names``, ``merges`` (all
+        sessions), ``snapshots`` (per merge), ``session_maps`` (the map at the end of
+        each session), ``sessions`` (per-session counts), ``relax_s`` (experience-map
+        time, s), ``wall_s``.
+    """
+    from torchratslam.maps.state import load_map, save_map
+
+    stored: list[MapState] = []
+    names: list[str] = []
+    out: dict[str, Any] = {"merges": [], "snapshots": [], "session_maps": [], "sessions": []}
+    relax_s = 0.0
+    t0 = time.perf_counter()
+    for i, s in enumerate(sessions):
+        name = getattr(s, "name", f"session{i + 1}")
+        ms = MultiSessionRatSLAM(
+            config,
+            stored,
+            names=names,
+            session=name,
+            shift_pose_cells=shift_pose_cells,
+            **ratslam_kwargs,
+        )
+        frames = s.frames() if isinstance(s, FrameSource) else s
+        if offsets is not None:
+            frames = _shifted(frames, offsets[i])
+        res = ms.run(frames, max_frames=max_frames, progress=progress)
+        relax_s += float(res.timings.get("experience_map", {}).get("total_s", 0.0))
+        state = ms.get_map()
+        if save_dir is not None:
+            d = Path(save_dir) / name / "state"
+            save_map(state, d)
+            state = load_map(d)
+        out["merges"] += ms.merges
+        out["snapshots"] += ms.snapshots
+        out["session_maps"].append(state)
+        out["sessions"].append(
+            {"name": name, "frames": res.frames, **state.summary(), "merges": len(ms.merges)}
+        )
+        names = [names[k] for k in ms.pending] + [name]
+        stored = [*ms.unmerged(), state]
+    return {
+        "maps": stored,
+        "names": names,
+        **out,
+        "relax_s": relax_s,
+        "wall_s": time.perf_counter() - t0,
+    }
+
+
+# ------------------------------------------------------------------ the tour comparison
+@dataclass
+class _Clock:
+    """The tour's sessions on one clock.
+
+    Attributes:
+        cont: the single-session reference run (continuous, or the concatenation).
+        full: the sessions concatenated with kidnaps between them.
+        starts: the frame of ``cont`` at which each session starts.
+        gt: ``cont``'s ground truth ``(T, 4)``.
+        offsets: seconds to add to each session's own timestamps.
+    """
+
+    cont: Any
+    full: Any
+    starts: list[int]
+    gt: np.ndarray
+    offsets: list[float]
+
+
+def _clock(tour: Any) -> _Clock:
+    """Put every session on the continuous run's clock (one ground truth for all maps);
+    a single-session tour, or one without roads between sessions, uses the
+    concatenation."""
+    full = tour.full()
+    cont = tour.continuous() if callable(getattr(tour, "continuous", None)) else full
+    parts = {p["name"]: p for p in getattr(cont, "info", {}).get("parts", [])}
+    if all(s.name in parts for s in tour.sessions):
+        starts = [parts[s.name]["start"] for s in tour.sessions]
+    else:
+        cont = full
+        starts = list(np.cumsum([0] + [len(s) for s in tour.sessions])[:-1])
+    offsets = [float(cont.times[a] - s.times[0]) for a, s in zip(starts, tour.sessions)]
+    return _Clock(cont, full, starts, cont.groundtruth(), offsets)
+
+
+def _single_run(
+    config: RatSLAMConfig, frames: Any, n: int | None, progress: bool, **ratslam_kwargs: Any
+) -> tuple[MapState, float]:
+    """One single-session map over ``frames`` and its wall time (s)."""
+    from torchratslam.maps.state import state_from_slam
+
+    t0 = time.perf_counter()
+    slam = RatSLAM(config, **ratslam_kwargs)
+    slam.run(frames, max_frames=n, progress=progress)
+    return state_from_slam(slam), time.perf_counter() - t0
+
+
+def _multi_block(run: dict[str, Any], gt: np.ndarray, config: RatSLAMConfig) -> dict[str, Any]:
+    """The report's entry of one multisession run (its final map, merges, timing)."""
+    fin = run["maps"][-1]
+    out = _map_metrics(fin, gt)
+    out.update(
+        maps=len(run["maps"]),
+        connected=len(run["maps"]) == 1,
+        merges=[
+            {"session": m["session"], "frame": m["frame"], "map": m["map_name"]}
+            for m in run["merges"]
+        ],
+        sessions=run["sessions"],
+        graph_error=_graph_error(fin, config),
+        relax_s=run["relax_s"],
+        wall_s=run["wall_s"],
+    )
+    return out
+
+
+def _icp(moving: MapState, fixed: MapState) -> Any:
+    """ICP of one map's experience positions onto another's (None if either is empty)."""
+    from torchratslam.eval.metrics import icp
+
+    m_xy, o_xy = moving.exp_pose[:, :2], fixed.exp_pose[:, :2]
+    return icp(m_xy, o_xy) if len(o_xy) and len(m_xy) else None
+
+
+def _comparison(
+    tour: Any,
+    clock: _Clock,
+    config: RatSLAMConfig,
+    singles: dict[str, tuple[MapState, float]],
+    multi: dict[str, Any],
+) -> tuple[dict[str, Any], dict[str, Any]]:
+    """The report comparing the single-session maps with the multisession one, and the
+    ICP results against the continuous map (``icp``: the project's; ``libicp``: the
+    paper's convention)."""
+    final = multi["maps"][-1]
+    (single, single_wall), (concat, concat_wall), (last, _) = (
+        singles[k] for k in ("single", "single_concatenated", "single_last_session")
+    )
+    ic, ic_concat, ic_last = _icp(final, single), _icp(final, concat), _icp(final, last)
+    from torchratslam.eval.icp import libicp_point_to_point
+
+    s_xy, m_xy = single.exp_pose[:, :2], final.exp_pose[:, :2]
+    # the paper's figure: LibICP, single-session map fixed (template), multisession moved
+    lib = libicp_point_to_point(s_xy, m_xy) if len(s_xy) and len(m_xy) else None
+    gt = clock.gt
+    extent = float(np.linalg.norm(np.ptp(gt[:, 1:3], axis=0)))
+    report: dict[str, Any] = {
+        "tour": getattr(tour, "name", "tour"),
+        "frames": int(sum(len(s) for s in tour.sessions)),
+        "frames_continuous": len(clock.cont),
+        "sessions": [s.name for s in tour.sessions],
+        "single_kind": "continuous" if clock.cont is not clock.full else "concatenated",
+        "single": {
+            **_map_metrics(single, gt),
+            "graph_error": _graph_error(single, config),
+            "wall_s": single_wall,
+        },
+        "single_concatenated": {
+            **_map_metrics(concat, clock.full.groundtruth()),
+            "graph_error": _graph_error(concat, config),
+            "wall_s": concat_wall,
+        },
+        "single_last_session": _map_metrics(last, gt),
+        "multi": _multi_block(multi, gt, config),
+        "icp_rmse": None if ic is None else float(ic.rmse),
+        "icp_rmse_relative": None if ic is None else float(ic.rmse / max(extent, 1e-12)),
+        "icp_rmse_concatenated": None if ic_concat is None else float(ic_concat.rmse),
+        "icp_rmse_last_session": None if ic_last is None else float(ic_last.rmse),
+        "tour_extent_m": extent,
+        "icp_libicp_mse_m2": None if lib is None else lib.residual_m2,
+        "paper_icp_mse_m2": PAPER_ICP_MSE_M2.get(getattr(tour, "name", ""), None),
+        "icp_note": (
+            "icp_libicp_mse_m2 compares with paper_icp_mse_m2: both are LibICP residuals, "
+            "the mean squared nearest-neighbour distance in m^2 after point-to-point ICP "
+            "from the identity with the single-session map fixed and the multisession "
+            "map moved; icp_rmse* are the project's RMSEs in m (not comparable with the "
+            "paper)"
+        ),
+        "merges": [
+            {
+                "session": m["session"],
+                "frame": m["frame"],
+                "map": m["map_name"],
+                "error": m["error"],
+                "scenario": m["scenario"],
+                "experiences_added": m["experiences_added"],
+            }
+            for m in multi["merges"]
+        ],
+    }
+    n_m = report["multi"]["experiences"]
+    for suffix, key in (
+        ("", "single"),
+        ("_concatenated", "single_concatenated"),
+        ("_last_session", "single_last_session"),
+    ):
+        report[f"experiences_difference_relative{suffix}"] = _relative(
+            n_m, report[key]["experiences"]
+        )
+    return report, {"icp": ic, "libicp": lib}
+
+
+def _relax_rows(
+    state: MapState, gt: np.ndarray, config: RatSLAMConfig, backends: list[str]
+) -> dict[str, Any] | None:
+    """Each backend relaxing ``state``'s graph once (None when it has no links)."""
+    from torchratslam.eval.metrics import interpolate_groundtruth
+    from torchratslam.graph.compare import compare_backends
+
+    pg = _posegraph(state, config)
+    if pg.num_edges == 0:
+        return None
+    truth = interpolate_groundtruth(gt, state.exp_t)
+    rows = compare_backends(
+        pg,
+        list(backends),
+        truth,
+        passes=config.experience_map.exp_loops,
+        correction=config.experience_map.exp_correction,
+    )
+    return {r["name"]: {k: r[k] for k in _METRIC_KEYS} for r in rows}
+
+
+def _backend_reports(
+    multi: dict[str, Any],
+    config: RatSLAMConfig,
+    gt: np.ndarray,
+    backends: tuple[str, ...] | list[str],
+    rerun: Any,
+) -> dict[str, Any]:
+    """The backend comparison: whole multisession runs with each backend
+    (``backends``), each merged graph and the final map relaxed by each
+    (``backends_after_merge``, ``backends_final_map``)."""
+    table: dict[str, Any] = {}
+    for name in backends:
+        run = multi if name == config.experience_map.exp_backend else rerun(name)
+        b = _multi_block(run, gt, config)
+        table[name] = {
+            "error": b["graph_error"],
+            "ate_rmse_m": b["ate_rmse_m"],
+            "time_s": run["relax_s"],
+            "experiences": b["experiences"],
+            "connected": b["connected"],
+        }
+    after = []
+    for m, snap in zip(multi["merges"], multi["snapshots"]):
+        rows = _relax_rows(snap["merged_state"], gt, config, list(backends))
+        if rows is not None:
+            after.append({"session": m["session"], "frame": m["frame"], "results": rows})
+    out: dict[str, Any] = {"backends": table, "backends_after_merge": after}
+    final = _relax_rows(multi["maps"][-1], gt, config, list(backends))
+    if final is not None:
+        out["backends_final_map"] = final
+    return out
+
+
+def run_tour(
+    config: RatSLAMConfig,
+    tour: Any,
+    *,
+    ablation: bool = False,
+    backends: tuple[str, ...] | list[str] = (),
+    save_dir: Any = None,
+    progress: bool = False,
+    max_frames: int | None = None,
+    merge_options: dict[str, Any] | None = None,
+    **ratslam_kwargs: Any,
+) -> dict[str, Any]:
+    """Multisession versus single-session mapping of a simulated tour.
+
+    Runs the single-session map over ``tour.continuous()`` (every session driven in
+    one continuous run, joined by drives along the tour's roads: the paper's single
+    mapping session), the multisession mapping of ``tour.sessions`` (each session
+    saved and loaded by the next), and, for reference, single-session maps over
+    ``tour.full()`` (the sessions concatenated with a kidnap between them) and over the
+    last session alone; then compares them.
+
+    Args:
+        config: the configuration.
+        tour: a :class:`torchratslam.sim.Tour` (``sessions``, ``continuous()``,
+            ``full()``, ``name``).
+        ablation: also run the multisession mapping without the pose-cell shift.
+        backends: also rerun the multisession mapping with each of these relaxation
+            backends (``exp_backend``), and relax each merged graph with each of them.
+        save_dir: where session maps are saved (``<dir>/multi/<session>/state``).
+        progress: progress bars.
+        max_frames: frames per session at most (quick checks; the continuous and
+            concatenated runs get this many per session, the bridges included).
+        merge_options: ``merge_maps`` options for every multisession run
+            (``exp_pc_shift``, ``match_exp``; default: the authors' code).
+
+    Returns:
+        ``report`` (JSON-able: the keys of ``OUT/report.json``) and ``data`` (the maps,
+        snapshots and ground truth for figures).
+    """
+    clock = _clock(tour)
+    limit = None if max_frames is None else max_frames * len(tour.sessions)
+    kw = dict(progress=progress, max_frames=max_frames, **ratslam_kwargs)
+    if merge_options:
+        kw["merge_options"] = dict(merge_options)
+    last_frames = _shifted(tour.sessions[-1].frames(), clock.offsets[-1])
+    singles = {  # the paper's single session; the concatenation; the last session alone
+        "single": _single_run(config, clock.cont.frames(), limit, progress, **ratslam_kwargs),
+        "single_concatenated": _single_run(
+            config, clock.full.frames(), limit, progress, **ratslam_kwargs
+        ),
+        "single_last_session": _single_run(
+            config, last_frames, max_frames, progress, **ratslam_kwargs
+        ),
+    }
+    save = None if save_dir is None else Path(save_dir) / "multi"
+    multi = run_sessions(config, tour.sessions, offsets=clock.offsets, save_dir=save, **kw)
+    report, icps = _comparison(tour, clock, config, singles, multi)
+    if merge_options:
+        report["merge_options"] = dict(merge_options)
+    data: dict[str, Any] = {
+        **{k: v[0] for k, v in singles.items()},
+        "multi": multi,
+        "groundtruth": clock.gt,
+        "offsets": clock.offsets,
+        **icps,
+        "session_starts": [float(clock.cont.times[a]) for a in clock.starts],
+        "world": getattr(tour, "world", None),
+    }
+    if ablation:
+        abl = run_sessions(
+            config, tour.sessions, offsets=clock.offsets, shift_pose_cells=False, **kw
+        )
+        report["ablation_no_pc_shift"] = _multi_block(abl, clock.gt, config)
+        data["ablation"] = abl
+    if backends:
+
+        def rerun(name: str) -> dict[str, Any]:
+            cfg = config.replace(exp_backend=name)
+            return run_sessions(cfg, tour.sessions, offsets=clock.offsets, **kw)
+
+        report.update(_backend_reports(multi, config, clock.gt, backends, rerun))
+    return {"report": report, "data": data}
+
+
+# ------------------------------------------------------------------ the report
+def _fmt(v: Any, spec: str = ".4g") -> str:
+    return "-" if v is None else format(v, spec)
+
+
+def _runs_table(report: dict[str, Any]) -> list[str]:
+    last = report["sessions"][-1]
+    rows = [
+        ("single session, continuous (the paper's single mapping session)", report["single"]),
+        (
+            "single session, sessions concatenated (kidnapped between them)",
+            report["single_concatenated"],
+        ),
+        (f"single session, {last} alone", report["single_last_session"]),
+        ("multisession", report["multi"]),
+    ]
+    if report.get("single_kind") == "concatenated":  # a tour without roads between sessions
+        rows = [(name, r) for name, r in rows if r is not report["single_concatenated"]]
+    if "ablation_no_pc_shift" in report:
+        rows.append(("multisession, no pose-cell shift", report["ablation_no_pc_shift"]))
+    lines = [
+        f"### {report['tour']}: {len(report['sessions'])} sessions, {report['frames']} frames "
+        f"({report['frames_continuous']} in the continuous run)",
+        "",
+        "| run | templates | experiences | links | ATE (m) | maps at end |",
+        "|---|---|---|---|---|---|",
+    ]
+    for name, r in rows:
+        lines.append(
+            f"| {name} | {r['templates']} | {r['experiences']} | {r['links']} | "
+            f"{_fmt(r['ate_rmse_m'])} | {r.get('maps', 1)} |"
+        )
+    return lines
+
+
+def _summary_lines(report: dict[str, Any]) -> list[str]:
+    last = report["sessions"][-1]
+    return [
+        "",
+        f"- ICP, the paper's figure (LibICP residual: mean squared nearest-neighbour "
+        f"distance, single-session map fixed, multisession moved): "
+        f"{_fmt(report.get('icp_libicp_mse_m2'))} m^2; the paper reports "
+        f"{_fmt(report.get('paper_icp_mse_m2'))} m^2",
+        f"- ICP RMSE (the project's figure, not the paper's) multisession vs single-session "
+        f"(continuous) map: "
+        f"{_fmt(report['icp_rmse'])} m ({_fmt(report['icp_rmse_relative'])} of the tour's "
+        f"{report['tour_extent_m']:.1f} m extent); vs the concatenated run: "
+        f"{_fmt(report['icp_rmse_concatenated'])} m; vs {last} alone: "
+        f"{_fmt(report['icp_rmse_last_session'])} m",
+        "- experiences, multi vs single (continuous): "
+        + _fmt(report["experiences_difference_relative"], "+.1%")
+        + ", vs concatenated: "
+        + _fmt(report["experiences_difference_relative_concatenated"], "+.1%")
+        + f", vs {last} alone: "
+        + _fmt(report["experiences_difference_relative_last_session"], "+.1%"),
+        "- merges: "
+        + (
+            ", ".join(
+                f"{m['session']} frame {m['frame']} with {m['map']}" for m in report["merges"]
+            )
+            or "none"
+        ),
+    ]
+
+
+def _backend_lines(report: dict[str, Any]) -> list[str]:
+    if "backends" not in report:
+        return []
+    lines = [
+        "",
+        "| backend (whole multisession run) | graph error | ATE (m) | "
+        "relaxation time (s) | experiences |",
+        "|---|---|---|---|---|",
+    ]
+    for name, b in report["backends"].items():
+        lines.append(
+            f"| {name} | {_fmt(b['error'])} | {_fmt(b['ate_rmse_m'])} | "
+            f"{_fmt(b['time_s'], '.3f')} | {b['experiences']} |"
+        )
+    if "backends_final_map" in report:
+        lines += [
+            "",
+            "relaxing the final multisession map's graph once more:",
+            "",
+            "| backend | initial error | error after | ATE (m) | time (s) |",
+            "|---|---|---|---|---|",
+        ]
+        for name, r in report["backends_final_map"].items():
+            lines.append(
+                f"| {name} | {_fmt(r['initial_error'])} | {_fmt(r['error'])} | "
+                f"{_fmt(r['ate_rmse_m'])} | {_fmt(r['time_s'], '.3f')} |"
+            )
+    return lines
+
+
+def report_markdown(report: dict[str, Any]) -> str:
+    """The report as Markdown tables (what the demo prints and the README shows)."""
+    lines = _runs_table(report) + _summary_lines(report) + _backend_lines(report)
+    return "\n".join(lines) + "\n"
+
+
+# ------------------------------------------------------------------ the experiment
+def tour_name(spec: str) -> str:
+    """The tour of a ``sim:NAME`` spec.
+
+    Raises:
+        InputError: the spec names one session (``sim:NAME/SESSION``).
+    """
+    name = spec.removeprefix("sim:")
+    if "/" in name:
+        raise InputError(f"--tour takes a whole tour (sim:NAME), not one session: {spec!r}")
+    return name
+
+
+def _write_json(path: Path, obj: Any) -> None:
+    """Atomic JSON write (temporary file + rename)."""
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
+    try:
+        with os.fdopen(fd, "w") as fh:
+            json.dump(
+                obj,
+                fh,
+                indent=1,
+                default=lambda v: v.item() if hasattr(v, "item") else str(v),
+            )
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def run_experiment(
+    config: Any,
+    tour_spec: str,
+    out: str | Path,
+    *,
+    ablation: bool = False,
+    backends: tuple[str, ...] = (),
+    seed: int = 0,
+    max_frames: int | None = None,
+    figures: bool = True,
+    progress: bool = False,
+    overrides: dict[str, Any] | None = None,
+    merge_options: dict[str, Any] | None = None,
+) -> dict[str, Any]:
+    """Run the experiment on a tour and write OUT (what the CLI and the demo call):
+    ``report.json``, ``report.md``, the figures and the session maps.
+
+    Args:
+        config: a ``RatSLAMConfig``, a config path/name, or None for the tour's shipped
+            config (:data:`TOUR_CONFIG`), unmodified.
+        tour_spec: ``sim:NAME``.
+        out: the output folder.
+        overrides: flat config keys replaced last.
+        merge_options: ``merge_maps`` options (default: the authors' code).
+
+    Returns:
+        :func:`run_tour`'s result (``report`` and ``data``).
+    """
+    from torchratslam.sim import get_tour
+    from torchratslam.viz.multisession import write_figures
+
+    name = tour_name(tour_spec)
+    if config is None:
+        config = load_config(TOUR_CONFIG.get(name))
+    elif isinstance(config, (str, Path)):
+        config = load_config(config)
+    if overrides:
+        config = config.replace(**overrides)
+    tour = get_tour(name, seed=seed)
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    result = run_tour(
+        config,
+        tour,
+        ablation=ablation,
+        backends=tuple(backends),
+        save_dir=out,
+        progress=progress,
+        max_frames=max_frames,
+        merge_options=merge_options,
+    )
+    report = result["report"]
+    report["seed"] = seed
+    report["config"] = config.to_flat()
+    _write_json(out / "report.json", report)
+    (out / "report.md").write_text(report_markdown(report))
+    if figures:
+        report["figures"] = [p.name for p in write_figures(result, out)]
+        _write_json(out / "report.json", report)
+    return result
