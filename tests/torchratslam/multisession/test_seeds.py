@@ -10,12 +10,7 @@ from torchratslam.graph.errors import ConfigError
 
 from torchratslam.config import load_config
 from torchratslam.experiments.multisession_tour import (
-    ABLATION_MARGIN,
-    SEED_TOLERANCE,
-    WRONG_PLACE_M,
     merge_distances,
-    seed_table,
-    seed_table_markdown,
 )
 from torchratslam.multisession.session import MultiSessionRatSLAM
 from torchratslam.pipeline import RatSLAM
