@@ -76,6 +76,12 @@ def register(subparsers: Any) -> argparse.ArgumentParser:
         "continuous single session / no pose-cell shift, merge distances)",
     )
     p.add_argument(
+        "--pc-shift-rotate",
+        action="store_true",
+        help="merge: rotate the partial map's pose-cell offsets by the heading shift "
+        "(default off: the paper's translation, Eq. 10); a deviation",
+    )
+    p.add_argument(
         "--merge-threshold",
         type=float,
         default=None,
@@ -117,7 +123,7 @@ def parse_seeds(spec: str) -> list[int]:
     return seeds
 
 
-def _seeds_main(args: argparse.Namespace, overrides: dict[str, str], merge: dict) -> int:
+def _seeds_main(args: argparse.Namespace, overrides: dict[str, str], merge: dict[str, Any]) -> int:
     import json
     import sys
 
@@ -171,11 +177,13 @@ def main(args: argparse.Namespace) -> int:
         if not sep:
             raise ConfigError(f"--set {item!r}: expected KEY=VALUE")
         overrides[key.strip()] = value.strip()
-    merge = {
+    merge: dict[str, Any] = {
         k: v
         for k, v in (("exp_pc_shift", args.exp_pc_shift), ("match_exp", args.match_exp))
         if v != {"exp_pc_shift": "experiences", "match_exp": "first"}[k]
     }
+    if args.pc_shift_rotate:
+        merge["pc_shift_rotate"] = True
     if args.seeds is not None:
         return _seeds_main(args, overrides, merge)
     result = run_experiment(
