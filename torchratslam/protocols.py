@@ -31,6 +31,7 @@ __all__ = [
     "LocalViewModule",
     "OdometrySource",
     "PoseCellModule",
+    "RangeMapper",
     "RelaxationBackend",
     "Stateful",
 ]
@@ -107,4 +108,25 @@ class GroundTruthSource(Protocol):
 
     def groundtruth(self) -> np.ndarray | None:
         """Rows ``[t, x, y, th]`` (None when unknown). Shape: ``(T, 4)``."""
+        ...
+
+
+@runtime_checkable
+class RangeMapper(Protocol):
+    """A range-sensor mapper (``registry.RANGE_MAPPERS``, e.g. MBARAM): frames with laser
+    scans and odometry in, the node of the place out."""
+
+    model: Any
+    """The learnt map (for MBARAM an :class:`~torchratslam.mbaram.model.MBARAM`)."""
+
+    def learn(self, frame: Frame) -> int:
+        """One mapping step; the winning (or new) node."""
+        ...
+
+    def localise(self, frame: Frame, *, odometry: bool = True) -> int:
+        """The node of ``frame`` without learning (-1: none), with or without odometry."""
+        ...
+
+    def __len__(self) -> int:
+        """The number of nodes."""
         ...

@@ -23,6 +23,7 @@ from torchratslam.protocols import (
     LocalViewModule,
     OdometrySource,
     PoseCellModule,
+    RangeMapper,
 )
 
 T = TypeVar("T")
@@ -130,3 +131,8 @@ LOCAL_VIEWS: Registry[LocalViewModule] = Registry("local view", LocalViewModule)
 POSE_CELLS: Registry[PoseCellModule] = Registry("pose-cell module", PoseCellModule)
 EXPERIENCE_MAPS: Registry[ExperienceMapModule] = Registry("experience map", ExperienceMapModule)
 ODOMETRY: Registry[OdometrySource] = Registry("odometry source", OdometrySource)
+RANGE_MAPPERS: Registry[RangeMapper] = Registry("range-sensor mapper", RangeMapper)
+"""Place recognition and mapping from laser scans (the alternative to local view + experience
+map for range sensors); ``"mbaram"`` is registered by :mod:`torchratslam.mbaram.model`.
+Factory: ``factory(params, *, odometry="groundtruth", dtype, device)``; the mapper has the
+:class:`~torchratslam.protocols.RangeMapper` interface."""

@@ -92,6 +92,12 @@ def register(subparsers: Any) -> argparse.ArgumentParser:
     p.add_argument(
         "--no-progress", action="store_true", help="no progress bars, e.g. --no-progress"
     )
+    p.add_argument(
+        "--mapper",
+        default="mbaram",
+        help="range-sensor mapper, a name in torchratslam.registry.RANGE_MAPPERS, e.g. "
+        "--mapper mbaram",
+    )
     p.set_defaults(func=main)
     return p
 
@@ -123,6 +129,7 @@ def main(args: argparse.Namespace) -> int:
         overrides=_parse_sets(args.set),
         plots=not args.no_plots,
         progress=not args.no_progress,
+        mapper=args.mapper,
     )
     print(summary_line(args.data, metrics, Path(args.out)))
     return 0

@@ -78,6 +78,33 @@ def register(subparsers: Any) -> argparse.ArgumentParser:
     )
     p.add_argument("--seed", type=int, default=0, help="simulator seed (default 0), e.g. --seed 2")
     p.add_argument(
+        "--seeds",
+        default=None,
+        help="per-seed check instead of one report: seeds as A-B or a,b,c (e.g. 0-9); "
+        "prints and writes OUT/seeds.json and OUT/seeds.md (experiences multisession / "
+        "continuous single session / no pose-cell shift, merge distances)",
+    )
+    p.add_argument(
+        "--pc-shift-rotate",
+        action="store_true",
+        help="merge: rotate the partial map's pose-cell offsets by the heading shift "
+        "(default off: the paper's translation, Eq. 10); a deviation",
+    )
+    p.add_argument(
+        "--merge-threshold",
+        type=float,
+        default=None,
+        help="match error for a merge with a stored map (default: vt_match_threshold, "
+        "the paper's); a deviation when set",
+    )
+    p.add_argument(
+        "--merge-persist",
+        type=int,
+        default=1,
+        help="merge only after this many consecutive new templates match the same "
+        "stored map (default 1: the paper's first match); a deviation when > 1",
+    )
+    p.add_argument(
         "--max-frames",
         type=int,
         default=None,
@@ -103,6 +130,65 @@ def register(subparsers: Any) -> argparse.ArgumentParser:
     return p
 
 
+def parse_seeds(spec: str) -> list[int]:
+    """``"0-9"`` or ``"0,3,5"`` (or both, comma-separated) -> the seeds."""
+    from torchratslam.graph.errors import ConfigError
+
+    seeds: list[int] = []
+    try:
+        for part in spec.split(","):
+            a, sep, b = part.strip().partition("-")
+            seeds += list(range(int(a), int(b) + 1)) if sep else [int(a)]
+    except ValueError:
+        raise ConfigError(f"--seeds {spec!r}: expected A-B or a,b,c (e.g. 0-9)") from None
+    if not seeds:
+        raise ConfigError(f"--seeds {spec!r}: no seeds")
+    return seeds
+
+
+def _seeds_main(args: argparse.Namespace, overrides: dict[str, str], merge: dict[str, Any]) -> int:
+    import json
+    import sys
+
+    from torchratslam.experiments.multisession_tour import seed_table, seed_table_markdown
+    from torchratslam.graph.io import atomic_write_text
+
+    seeds = parse_seeds(args.seeds)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+
+    def on_row(seed: int, row: dict) -> None:
+        if not args.quiet:
+            print(
+                f"seed {seed} ({seeds.index(seed) + 1}/{len(seeds)}): experiences "
+                f"multisession {row['multi']}, single {row['single']}"
+                + (f", no pose-cell shift {row['ablation']}" if "ablation" in row else "")
+                + ", merge distances "
+                + (", ".join(f"{m['distance_m']:.2f} m" for m in row["merges"]) or "none"),
+                file=sys.stderr,
+                flush=True,
+            )
+
+    table = seed_table(
+        args.tour,
+        seeds,
+        config=args.config,
+        ablation=args.ablation,
+        max_frames=args.max_frames,
+        overrides=overrides,
+        merge_options=merge,
+        on_row=on_row,
+        merge_threshold=args.merge_threshold,
+        merge_persist=args.merge_persist,
+    )
+    text = seed_table_markdown(table)
+    atomic_write_text(out / "seeds.json", json.dumps(table, indent=1) + "\n")
+    atomic_write_text(out / "seeds.md", text)
+    print(text)
+    print(f"wrote {out / 'seeds.json'}")
+    return 0
+
+
 def main(args: argparse.Namespace) -> int:
     from torchratslam.experiments.multisession_tour import report_markdown, run_experiment
     from torchratslam.graph.errors import ConfigError
@@ -114,6 +200,15 @@ def main(args: argparse.Namespace) -> int:
         if not sep:
             raise ConfigError(f"--set {item!r}: expected KEY=VALUE")
         overrides[key.strip()] = value.strip()
+    merge: dict[str, Any] = {
+        k: v
+        for k, v in (("exp_pc_shift", args.exp_pc_shift), ("match_exp", args.match_exp))
+        if v != {"exp_pc_shift": "experiences", "match_exp": "first"}[k]
+    }
+    if args.pc_shift_rotate:
+        merge["pc_shift_rotate"] = True
+    if args.seeds is not None:
+        return _seeds_main(args, overrides, merge)
     result = run_experiment(
         args.config,
         args.tour,
@@ -125,11 +220,9 @@ def main(args: argparse.Namespace) -> int:
         figures=not args.no_figures,
         progress=not args.quiet,
         overrides=overrides,
-        merge_options={
-            k: v
-            for k, v in (("exp_pc_shift", args.exp_pc_shift), ("match_exp", args.match_exp))
-            if v != {"exp_pc_shift": "experiences", "match_exp": "first"}[k]
-        },
+        merge_options=merge,
+        merge_threshold=args.merge_threshold,
+        merge_persist=args.merge_persist,
         rerun=args.rerun,
         rerun_save=args.rerun_save,
     )

@@ -38,6 +38,9 @@ __all__ = [
     "run_experiment",
     "run_sessions",
     "run_tour",
+    "seed_row",
+    "seed_table",
+    "seed_table_markdown",
 ]
 
 PAPER_ICP_RMSE = PAPER_ICP_MSE_M2  # old name: the paper prints "RMSE", but its figures are
@@ -409,6 +412,7 @@ def run_tour(
     max_frames: int | None = None,
     merge_options: dict[str, Any] | None = None,
     observer: Any = None,
+    session_options: dict[str, Any] | None = None,
     **ratslam_kwargs: Any,
 ) -> dict[str, Any]:
     """Multisession versus single-session mapping of a simulated tour.
@@ -434,6 +438,8 @@ def run_tour(
         merge_options: ``merge_maps`` options for every multisession run
             (``exp_pc_shift``, ``match_exp``; default: the authors' code).
         observer: watches the multisession mapping's sessions (see :func:`run_sessions`).
+        session_options: :class:`MultiSessionRatSLAM` options for every multisession
+            run (``merge_threshold``, ``merge_persist``; default: the paper's).
 
     Returns:
         ``report`` (JSON-able: the keys of ``OUT/report.json``) and ``data`` (the maps,
@@ -444,6 +450,7 @@ def run_tour(
     kw = dict(progress=progress, max_frames=max_frames, **ratslam_kwargs)
     if merge_options:
         kw["merge_options"] = dict(merge_options)
+    kw.update(session_options or {})
     last_frames = _shifted(tour.sessions[-1].frames(), clock.offsets[-1])
     singles = {  # the paper's single session; the concatenation; the last session alone
         "single": _single_run(config, clock.cont.frames(), limit, progress, **ratslam_kwargs),
@@ -461,6 +468,8 @@ def run_tour(
     report, icps = _comparison(tour, clock, config, singles, multi)
     if merge_options:
         report["merge_options"] = dict(merge_options)
+    if session_options:
+        report["session_options"] = dict(session_options)
     data: dict[str, Any] = {
         **{k: v[0] for k, v in singles.items()},
         "multi": multi,
@@ -621,6 +630,8 @@ def run_experiment(
     merge_options: dict[str, Any] | None = None,
     rerun: bool = False,
     rerun_save: str | Path | None = None,
+    merge_threshold: float | None = None,
+    merge_persist: int = 1,
 ) -> dict[str, Any]:
     """Run the experiment on a tour and write OUT (what the CLI and the demo call):
     ``report.json``, ``report.md``, the figures and the session maps.
@@ -635,6 +646,8 @@ def run_experiment(
         rerun: watch the multisession mapping live in a rerun viewer
             (:class:`torchratslam.viz.rerun_viewer.RerunObserver`; extra ``viewer``).
         rerun_save: record the multisession mapping for rerun into this ``.rrd`` file.
+        merge_threshold: :class:`MultiSessionRatSLAM` ``merge_threshold`` (None: the paper's).
+        merge_persist: :class:`MultiSessionRatSLAM` ``merge_persist`` (1: the paper's).
 
     Returns:
         :func:`run_tour`'s result (``report`` and ``data``).
@@ -668,6 +681,11 @@ def run_experiment(
             max_frames=max_frames,
             merge_options=merge_options,
             observer=observer,
+            session_options={
+                k: v
+                for k, v in (("merge_threshold", merge_threshold), ("merge_persist", merge_persist))
+                if v != {"merge_threshold": None, "merge_persist": 1}[k]
+            },
         )
     finally:
         if observer is not None:
@@ -681,3 +699,210 @@ def run_experiment(
         report["figures"] = [p.name for p in write_figures(result, out)]
         _write_json(out / "report.json", report)
     return result
+
+
+# ------------------------------------------------------------------ across seeds
+SEED_TOLERANCE = 0.02
+"""Issue 18: the merged map's experience count within 2% of the continuous run's."""
+ABLATION_MARGIN = 0.10
+"""Issue 18: without the pose-cell shift at least 10% more experiences."""
+WRONG_PLACE_M = 1.0
+"""A merge whose two matched experiences lie further apart (ground truth) is wrong."""
+
+
+def _gt_at(gt: np.ndarray, t: float) -> np.ndarray:
+    """Ground-truth ``(x, y)`` at the row nearest time ``t``. Shape: gt ``(T, 4)``."""
+    return np.asarray(gt[int(np.argmin(np.abs(gt[:, 0] - t))), 1:3], np.float64)
+
+
+def merge_distances(merges: list[dict[str, Any]], gt: np.ndarray) -> list[float]:
+    """Ground-truth distance (m) between the two experiences matched by each merge.
+
+    Shape:
+        gt: ``(T, 4)`` rows ``[t, x, y, th]`` on the merges' clock.
+    """
+    out = []
+    for m in merges:
+        a, b = m.get("loaded_exp_t"), m.get("partial_exp_t")
+        if a is None or b is None or not (np.isfinite(a) and np.isfinite(b)):
+            out.append(float("nan"))
+            continue
+        out.append(float(np.linalg.norm(_gt_at(gt, a) - _gt_at(gt, b))))
+    return out
+
+
+def seed_row(
+    config: RatSLAMConfig,
+    tour: Any,
+    *,
+    ablation: bool = True,
+    max_frames: int | None = None,
+    merge_options: dict[str, Any] | None = None,
+    **session_kwargs: Any,
+) -> dict[str, Any]:
+    """One seed of the per-seed check: the continuous single-session run, the
+    multisession run and (``ablation``) the multisession run without the pose-cell shift.
+
+    Args:
+        config: the configuration.
+        tour: the simulated tour of this seed.
+        ablation: also run without the pose-cell shift.
+        max_frames: frames per session at most (quick checks).
+        merge_options: ``merge_maps`` options.
+        **session_kwargs: :class:`MultiSessionRatSLAM` options (``merge_threshold``,
+            ``merge_persist``).
+
+    Returns:
+        ``single``, ``multi``, ``ablation`` (experience counts), ``diff`` and
+        ``ablation_diff`` (relative to single), ``merges`` (session, frame, ground-truth
+        distance of the matched experiences in m), ``wrong_merges``.
+    """
+    clock = _clock(tour)
+    limit = None if max_frames is None else max_frames * len(tour.sessions)
+    kw: dict[str, Any] = dict(max_frames=max_frames, **session_kwargs)
+    if merge_options:
+        kw["merge_options"] = dict(merge_options)
+    single, _ = _single_run(config, clock.cont.frames(), limit, False)
+    multi = run_sessions(config, tour.sessions, offsets=clock.offsets, **kw)
+    n_s, n_m = single.n_experiences, multi["maps"][-1].n_experiences
+    dist = merge_distances(multi["merges"], clock.gt)
+    row: dict[str, Any] = {
+        "single": int(n_s),
+        "multi": int(n_m),
+        "maps": len(multi["maps"]),
+        "diff": _relative(n_m, n_s),
+        "merges": [
+            {"session": m["session"], "frame": m["frame"], "error": m["error"], "distance_m": d}
+            for m, d in zip(multi["merges"], dist)
+        ],
+        "wrong_merges": int(sum(1 for d in dist if not d <= WRONG_PLACE_M)),
+    }
+    if ablation:
+        abl = run_sessions(
+            config, tour.sessions, offsets=clock.offsets, shift_pose_cells=False, **kw
+        )
+        n_a = abl["maps"][-1].n_experiences
+        row.update(ablation=int(n_a), ablation_diff=_relative(n_a, n_s))
+    return row
+
+
+def seed_table(
+    tour_spec: str,
+    seeds: Iterable[int],
+    *,
+    config: Any = None,
+    ablation: bool = True,
+    max_frames: int | None = None,
+    overrides: dict[str, Any] | None = None,
+    merge_options: dict[str, Any] | None = None,
+    on_row: Any = None,
+    **session_kwargs: Any,
+) -> dict[str, Any]:
+    """The per-seed check of issue 18 on a simulated tour.
+
+    Args:
+        tour_spec: ``sim:NAME``.
+        seeds: simulator seeds.
+        config: config, path/name, or None for the tour's shipped config, unmodified.
+        ablation: also run without the pose-cell shift.
+        max_frames: frames per session at most.
+        overrides: flat config keys replaced last.
+        merge_options: ``merge_maps`` options.
+        on_row: called with ``(seed, row)`` after each seed (progress).
+        **session_kwargs: :class:`MultiSessionRatSLAM` options.
+
+    Returns:
+        ``tour``, ``rows`` (seed -> :func:`seed_row`), and the summary: ``within``
+        (seeds within :data:`SEED_TOLERANCE`), ``ablation_above`` (seeds whose ablation
+        is at least :data:`ABLATION_MARGIN` above), ``wrong_merges``, ``seeds``.
+    """
+    from torchratslam.sim import get_tour
+
+    name = tour_name(tour_spec)
+    if config is None:
+        config = load_config(TOUR_CONFIG.get(name))
+    elif isinstance(config, (str, Path)):
+        config = load_config(config)
+    if overrides:
+        config = config.replace(**overrides)
+    rows: dict[int, dict[str, Any]] = {}
+    for seed in seeds:
+        row = seed_row(
+            config,
+            get_tour(name, seed=int(seed)),
+            ablation=ablation,
+            max_frames=max_frames,
+            merge_options=merge_options,
+            **session_kwargs,
+        )
+        rows[int(seed)] = row
+        if on_row is not None:
+            on_row(int(seed), row)
+    diffs = [r["diff"] for r in rows.values()]
+    out: dict[str, Any] = {
+        "tour": name,
+        "seeds": list(rows),
+        "rows": rows,
+        "within": int(sum(1 for d in diffs if d is not None and abs(d) <= SEED_TOLERANCE)),
+        "wrong_merges": int(sum(r["wrong_merges"] for r in rows.values())),
+        "options": {**session_kwargs, **(merge_options or {})},
+    }
+    if ablation:
+        out["ablation_above"] = int(
+            sum(
+                1
+                for r in rows.values()
+                if r["ablation_diff"] is not None and r["ablation_diff"] >= ABLATION_MARGIN
+            )
+        )
+    return out
+
+
+def seed_table_markdown(table: dict[str, Any]) -> str:
+    """The per-seed table as Markdown (experiences: multisession / single, ablation)."""
+    seeds = table["seeds"]
+    rows = table["rows"]
+    head = "| seed | " + " | ".join(str(s) for s in seeds) + " |"
+    lines = [
+        f"### {table['tour']}: experiences per seed",
+        "",
+        head,
+        "|---|" + "---|" * len(seeds),
+        "| multi / single | "
+        + " | ".join(f"{rows[s]['multi']}/{rows[s]['single']}" for s in seeds)
+        + " |",
+        "| difference | " + " | ".join(_fmt(rows[s]["diff"], "+.1%") for s in seeds) + " |",
+    ]
+    if "ablation_above" in table:
+        lines.append(
+            "| ablation (no pose-cell shift) | "
+            + " | ".join(
+                f"{rows[s]['ablation']} ({_fmt(rows[s]['ablation_diff'], '+.0%')})" for s in seeds
+            )
+            + " |"
+        )
+    lines.append(
+        "| merge distance (m) | "
+        + " | ".join(
+            ", ".join(_fmt(m["distance_m"], ".2f") for m in rows[s]["merges"]) or "none"
+            for s in seeds
+        )
+        + " |"
+    )
+    n = len(seeds)
+    lines += [
+        "",
+        f"- within {SEED_TOLERANCE:.0%} of the continuous single session: "
+        f"{table['within']}/{n} seeds",
+    ]
+    if "ablation_above" in table:
+        lines.append(
+            f"- ablation at least {ABLATION_MARGIN:.0%} above: {table['ablation_above']}/{n} seeds"
+        )
+    lines.append(
+        f"- merges at a wrong place (matched experiences > {WRONG_PLACE_M:g} m apart): "
+        f"{table['wrong_merges']}"
+    )
+    if table.get("options"):
+        lines.append(f"- options: {table['options']}")
+    return "\n".join(lines) + "\n"

@@ -182,6 +182,27 @@ def rigid_transform(poses: np.ndarray, dth: float, tx: float, ty: float) -> np.n
     return p
 
 
+def _rotate_shift(
+    pcs: np.ndarray, src: np.ndarray, dst: np.ndarray, dims: np.ndarray
+) -> np.ndarray:
+    """Move pose-cell coordinates so that ``src`` lands on ``dst``, rotating the (x, y)
+    offsets from ``src`` (the shorter way round the torus) by the heading shift
+    ``(dst_th - src_th) * 2 pi / n_th``; th is shifted as in Eq. 10.
+
+    Shape:
+        pcs: ``(N, 3)``; src, dst, dims: ``(3,)``; returns ``(N, 3)``.
+    """
+    pcs = np.asarray(pcs, np.float64).reshape(-1, 3)
+    rel = pcs - src
+    half = dims[:2] / 2.0
+    rel[:, :2] = np.mod(rel[:, :2] + half, dims[:2]) - half
+    a = float(dst[2] - src[2]) * 2.0 * math.pi / float(dims[2])
+    c, s = math.cos(a), math.sin(a)
+    x, y = rel[:, 0].copy(), rel[:, 1].copy()
+    rel[:, 0], rel[:, 1] = c * x - s * y, s * x + c * y
+    return np.mod(dst + rel, dims)
+
+
 def merge_maps(
     loaded: MapState,
     partial: MapState,
@@ -194,6 +215,7 @@ def merge_maps(
     shift_pose_cells: bool = True,
     exp_pc_shift: str = "experiences",
     match_exp: str = "first",
+    pc_shift_rotate: bool = False,
 ) -> MergeResult:
     """Merge ``partial`` into ``loaded`` (Algorithm 1), given the template match.
 
@@ -211,6 +233,12 @@ def merge_maps(
             (the paper's single shift), see :data:`EXP_PC_SHIFTS`.
         match_exp: ``"first"`` (default, the authors' code) or ``"nearest"``, see
             :data:`MATCH_EXPS`.
+        pc_shift_rotate: also rotate the partial map's pose-cell coordinates about the
+            matched ones by the heading shift (``delta_th`` cells), so that the
+            displacements between partial templates, laid down in the partial
+            network's heading frame, point the same way in the loaded network's frame
+            after the activity is rolled in ``th`` (default False: the paper's pure
+            translation, Eq. 10). A deviation.
 
     Returns:
         A :class:`MergeResult`. The inputs are not modified.
@@ -264,7 +292,12 @@ def merge_maps(
     # (ii)/(iii) pose cells, Eqs. 10-12
     delta = loaded.template_pc[u] - partial.template_pc[z]
     assoc_shift = delta if shift_pose_cells else np.zeros(3)
-    t_pc = np.mod(partial.template_pc[keep_t] + assoc_shift, dims)
+    if shift_pose_cells and pc_shift_rotate:
+        t_pc = _rotate_shift(
+            partial.template_pc[keep_t], partial.template_pc[z], loaded.template_pc[u], dims
+        )
+    else:
+        t_pc = np.mod(partial.template_pc[keep_t] + assoc_shift, dims)
     # (iv) experiences, Eqs. 13-17
     if e_z >= 0:
         dth = float(
@@ -289,7 +322,12 @@ def merge_maps(
         exp_shift = loaded.exp_pc[e_u] - partial.exp_pc[e_z]
     else:
         exp_shift = delta
-    new_pc = np.mod(partial.exp_pc[keep_e] + exp_shift, dims)
+    if shift_pose_cells and pc_shift_rotate:
+        by_exp = exp_pc_shift == "experiences" and e_z >= 0
+        src = partial.exp_pc[e_z] if by_exp else partial.template_pc[z]
+        new_pc = _rotate_shift(partial.exp_pc[keep_e], src, src + exp_shift, dims)
+    else:
+        new_pc = np.mod(partial.exp_pc[keep_e] + exp_shift, dims)
     new_tpl = _apply(tmap, partial.exp_template[keep_e])
     lf, lt = _apply(emap, partial.link_from), _apply(emap, partial.link_to)
     keep_l = lf != lt  # a link between e_z and e_u cannot exist; guard anyway

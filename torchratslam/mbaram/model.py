@@ -30,8 +30,11 @@ are :func:`quantisation_error` (Eq. 14), :func:`compression_ratio` (Eq. 15) and
 without the odometry channel.
 
 MBARAM is a laser-and-odometry mapper, not an image local view nor a pose-cell
-experience map, so it is exposed as a class and not registered in
-:mod:`torchratslam.registry`.
+experience map: :class:`MBARAMMapper` (the frame-level module, lasers of the simulator
+and odometry in, node out) is registered as ``"mbaram"`` in
+:data:`torchratslam.registry.RANGE_MAPPERS`, and :func:`run_mbaram` builds its mapper
+from that registry by name.
+
 
 Example:
     >>> import torch
@@ -58,10 +61,12 @@ from torchratslam.graph.errors import ConfigError, InputError, MapFormatError
 from torchratslam.graph.geometry import odometry_step, wrap_angle
 from torchratslam.graph.params import Params, param
 from torchratslam.messages import Frame
+from torchratslam.registry import RANGE_MAPPERS
 
 __all__ = [
     "LASER_CHANNELS",
     "MBARAM",
+    "MBARAMMapper",
     "MBARAMParams",
     "MatchResult",
     "OdometryIntegrator",
@@ -109,6 +114,14 @@ class MBARAMParams(Params):
         30.0, "ranges are clipped to [0, laser_max_range] metres", gt=0.0
     )
     odo_scale: float = param(1.0, "position units per metre fed to the odometry channel", gt=0.0)
+    laser_outlier: float = param(
+        0.0,
+        "laser channels: weight eps of a uniform outlier density on [0, laser_max_range] "
+        "mixed into each beam's Gaussian, p = (1 - eps) N + eps U (0 = off, the paper's "
+        "Gaussian); diagonal covariance only",
+        ge=0.0,
+        lt=1.0,
+    )
     loc_threshold: float = param(
         1.0, "Eq. 16: success when node-to-robot distance < this (m)", gt=0.0
     )
@@ -355,7 +368,15 @@ class MBARAM:
             else:
                 r = d.square_().div_(ch.cov[:n])  # (x - mu)^2 / sigma^2 per dimension
                 q = r.sum(-1)
-            logp = -0.5 * (ch.dim * _LOG_2PI + ch.logdet[:n] + q)  # Eq. 5
+            eps = self.params.laser_outlier
+            if eps > 0 and k != "odometry" and not ch.full:
+                # per beam log((1 - eps) N(x; mu, s2) + eps / R): a beam blocked by a
+                # pedestrian or a moved box costs at most -log(eps / R), not (x - mu)^2 / s2
+                log_u = math.log(eps / (self.params.laser_max_range * self.params.laser_scale))
+                logn = (r + ch.logcov[:n] + _LOG_2PI).mul_(-0.5).add_(math.log1p(-eps))
+                logp = torch.logaddexp(logn, torch.full_like(logn, log_u)).sum(-1)
+            else:
+                logp = -0.5 * (ch.dim * _LOG_2PI + ch.logdet[:n] + q)  # Eq. 5
             joint = logp + logprior
             logpost = joint - torch.logsumexp(joint, 0)  # Eqs. 1, 4
             if self.weights[k] > 0:
@@ -752,45 +773,98 @@ class RunResult:
     loc_without: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
 
 
-class _Odometry:
-    """The odometry channel's pose over a whole run (dead reckoning is continuous)."""
+@RANGE_MAPPERS.register("mbaram")
+class MBARAMMapper:
+    """MBARAM as a module of the pipeline: :class:`~torchratslam.messages.Frame` in, node out.
 
-    def __init__(self, params: MBARAMParams, mode: str) -> None:
-        self.params, self.mode = params, mode
+    Builds the channel inputs from each frame's laser scans (``frame.scans``) and its
+    odometric pose (the ground-truth pose, the paper's accurate odometry, or dead
+    reckoning of ``vtrans``/``vrot``, continuous over the whole run), then learns
+    (Algorithm 1) or localises (Section 2.1.3) with :class:`MBARAM`.
+
+    Args:
+        params: MBARAM parameters.
+        odometry: ``"groundtruth"`` or ``"integrated"``.
+        dtype: float dtype of the node statistics.
+        device: torch device.
+    """
+
+    def __init__(
+        self,
+        params: MBARAMParams | None = None,
+        *,
+        odometry: str = "groundtruth",
+        dtype: torch.dtype = torch.float64,
+        device: torch.device | str | None = None,
+    ) -> None:
+        if odometry not in ("groundtruth", "integrated"):
+            raise ConfigError(f"odometry must be 'groundtruth' or 'integrated', got {odometry!r}")
+        self.params = params if params is not None else MBARAMParams()
+        self.mode = odometry
+        self.model = MBARAM(self.params, dtype=dtype, device=device)
         self.integ: OdometryIntegrator | None = None
+        self.keep_inputs = False  # remember every frame's inputs (to replay the mapping frames)
+        self._memo: dict[int, tuple[Frame, dict[str, np.ndarray], tuple[float, float, float]]] = {}
 
-    def __call__(self, frames: Iterable[Frame]):
-        for f in frames:
-            if f.pose is None and self.mode == "groundtruth":
-                raise InputError("odometry='groundtruth' needs frames with a ground-truth pose")
-            if self.integ is None:
-                self.integ = OdometryIntegrator(*(f.pose if f.pose is not None else (0, 0, 0)))
-            if self.mode == "integrated":
-                pose = self.integ.step(f.vtrans, f.vrot, f.dt)
-            else:
-                pose = cast(tuple[float, float, float], f.pose)  # checked above
-            true = f.pose if f.pose is not None else pose
-            yield frame_inputs(f.scans, pose, self.params), true
+    def __len__(self) -> int:
+        return len(self.model)
+
+    def inputs(self, frame: Frame) -> tuple[dict[str, np.ndarray], tuple[float, float, float]]:
+        """The channel vectors of ``frame`` and its odometric pose (one integration step)."""
+        hit = self._memo.get(id(frame))
+        if hit is not None and hit[0] is frame:
+            return hit[1], hit[2]
+        if frame.pose is None and self.mode == "groundtruth":
+            raise InputError("odometry='groundtruth' needs frames with a ground-truth pose")
+        if self.integ is None:
+            self.integ = OdometryIntegrator(*(frame.pose if frame.pose is not None else (0, 0, 0)))
+        if self.mode == "integrated":
+            pose = self.integ.step(frame.vtrans, frame.vrot, frame.dt)
+        else:
+            pose = cast(tuple[float, float, float], tuple(float(v) for v in frame.pose or ()))
+        x = frame_inputs(frame.scans, pose, self.params)
+        if not self.keep_inputs:
+            self._memo.clear()
+        self._memo[id(frame)] = (frame, x, pose)
+        return x, pose
+
+    def learn(self, frame: Frame) -> int:
+        """One mapping step on ``frame``; returns the winning (or new) node."""
+        return self.model.learn(self.inputs(frame)[0]).node
+
+    def localise(self, frame: Frame, *, odometry: bool = True) -> int:
+        """The node ``frame`` is localised at (-1 = none passes vigilance), no learning.
+
+        Args:
+            frame: the frame (its scans, and its pose when ``odometry``).
+            odometry: use the odometry channel, or the lasers alone.
+        """
+        x = self.inputs(frame)[0]
+        return self.model.localise(x, None if odometry else LASER_CHANNELS).node
+
+
+def _true_pose(mapper: Any, f: Frame) -> Sequence[float]:
+    return f.pose if f.pose is not None else mapper.inputs(f)[1]
 
 
 def _learn(
-    model: MBARAM, odo: _Odometry, map_laps: Sequence[Iterable[Frame]], *, keep: bool
+    mapper: Any, map_laps: Sequence[Iterable[Frame]], *, keep: bool
 ) -> tuple[np.ndarray, np.ndarray, list[int], list]:
     """Learn the map lap by lap.
 
     Returns:
         The true positions ``(F, 2)``, the winning node of every frame ``(F,)``, the
-        nodes added per lap and (``keep``) the frames' inputs for a replay.
+        nodes added per lap and (``keep``) the frames for a replay.
     """
     path, winners, per_lap, replay = [], [], [], []
     for lap in map_laps:
-        before = len(model)
-        for x, true in odo(lap):
-            winners.append(model.learn(x).node)
-            path.append(true[:2])
+        before = len(mapper)
+        for f in lap:
+            winners.append(mapper.learn(f))
+            path.append(_true_pose(mapper, f)[:2])
             if keep:
-                replay.append((0, x, true))
-        per_lap.append(len(model) - before)
+                replay.append((0, f))
+        per_lap.append(len(mapper) - before)
     if not winners:
         raise InputError("MBARAM got no frames to map")
     return np.asarray(path, float), np.asarray(winners), per_lap, replay
@@ -810,7 +884,7 @@ def _node_positions(n: int, path: np.ndarray, winners: np.ndarray) -> np.ndarray
 
 
 def _localise(
-    model: MBARAM, node_xy: np.ndarray, replay: list
+    mapper: Any, node_xy: np.ndarray, replay: list
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Localise every replayed frame with all channels and with the lasers only.
 
@@ -820,13 +894,13 @@ def _localise(
     """
     loc_true, loc_lap, with_xy, without_xy = [], [], [], []
     nan2 = np.array([np.nan, np.nan])
-    for i, x, true in replay:
-        loc_true.append(true[:2])
+    for i, f in replay:
         loc_lap.append(i)
-        r = model.localise(x)
-        with_xy.append(node_xy[r.node] if r.node >= 0 else nan2)
-        r = model.localise(x, LASER_CHANNELS)
-        without_xy.append(node_xy[r.node] if r.node >= 0 else nan2)
+        node = mapper.localise(f)
+        loc_true.append(_true_pose(mapper, f)[:2])
+        with_xy.append(node_xy[node] if node >= 0 else nan2)
+        node = mapper.localise(f, odometry=False)
+        without_xy.append(node_xy[node] if node >= 0 else nan2)
     return (
         np.asarray(loc_true, float).reshape(-1, 2),
         np.asarray(loc_lap, np.int64),
@@ -846,6 +920,7 @@ def run_mbaram(
     *,
     odometry: str = "groundtruth",
     dtype: torch.dtype = torch.float64,
+    mapper: str = "mbaram",
 ) -> RunResult:
     """Learn a map over ``map_laps`` then localise on ``loc_laps`` with and without odometry.
 
@@ -857,23 +932,26 @@ def run_mbaram(
         odometry: ``"groundtruth"`` (the paper assumes accurate odometry, e.g. GPS) or
             ``"integrated"`` (dead reckoning from the frames' noisy vtrans/vrot).
         dtype: float dtype of the node statistics.
+        mapper: the range-sensor mapper, a name in
+            :data:`torchratslam.registry.RANGE_MAPPERS` (its ``model`` must be an
+            :class:`MBARAM`).
 
     Returns:
         :class:`RunResult`; ``metrics`` has nodes, edges, frames, qe, qe_m, cr,
         nodes_per_lap, localisation_rate_with_odometry,
         localisation_rate_without_odometry and their per-lap values.
     """
-    if odometry not in ("groundtruth", "integrated"):
-        raise ConfigError(f"odometry must be 'groundtruth' or 'integrated', got {odometry!r}")
     params = params if params is not None else MBARAMParams()
-    model = MBARAM(params, dtype=dtype)
-    odo = _Odometry(params, odometry)
-    path_a, win_a, per_lap, replay = _learn(model, odo, map_laps, keep=not loc_laps)
+    mapping = RANGE_MAPPERS.build(mapper, params, odometry=odometry, dtype=dtype)
+    model = mapping.model
+    if isinstance(mapping, MBARAMMapper):
+        mapping.keep_inputs = not loc_laps  # the replay reuses the mapping frames' inputs
+    path_a, win_a, per_lap, replay = _learn(mapping, map_laps, keep=not loc_laps)
     node_xy = _node_positions(len(model), path_a, win_a)
     qe_m = float(np.linalg.norm(path_a - node_xy[win_a], axis=1).mean())
     if loc_laps:
-        replay = [(i, x, t) for i, lap in enumerate(loc_laps) for x, t in odo(lap)]
-    loc_true_a, loc_lap_a, with_xy, without_xy = _localise(model, node_xy, replay)
+        replay = [(i, f) for i, lap in enumerate(loc_laps) for f in lap]
+    loc_true_a, loc_lap_a, with_xy, without_xy = _localise(mapping, node_xy, replay)
     thr = params.loc_threshold
     ok_with = localisation_success(with_xy, loc_true_a, thr)
     ok_without = localisation_success(without_xy, loc_true_a, thr)

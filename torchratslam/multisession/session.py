@@ -32,6 +32,7 @@ import numpy as np
 import torch
 
 from torchratslam.config import RatSLAMConfig
+from torchratslam.graph.errors import ConfigError
 from torchratslam.maps.merge import merge_maps, pick_experience
 from torchratslam.maps.state import (
     MapState,
@@ -61,6 +62,12 @@ class MultiSessionRatSLAM:
             :attr:`snapshots` (for figures).
         merge_options: extra arguments of :func:`~torchratslam.maps.merge.merge_maps`
             (``exp_pc_shift``, ``match_exp``; default: the authors' code).
+        merge_threshold: match error below which a new template matches a stored map's
+            template (default None: ``vt_match_threshold``, the paper's single
+            threshold). A deviation when set.
+        merge_persist: merge only when this many consecutive new templates match the
+            same stored map (default 1: the first match merges, the paper). A
+            deviation when > 1; the merge uses the last match.
         **ratslam_kwargs: passed to :class:`~torchratslam.pipeline.RatSLAM`
             (``local_view``, ``pose_cells``, ``experience_map``, ``odometry``, ``dtype``,
             ``device``).
@@ -71,7 +78,8 @@ class MultiSessionRatSLAM:
             ``frame_index``, ``timings``, ``trajectory()``, ...) is the slam's.
         merges: one dict per merge: ``frame``, ``map`` (index in ``stored``),
             ``map_name``, ``session``, ``scenario`` ("i": first view, "ii": a partial
-            map), ``error``, ``loaded_template``, ``loaded_exp``, ``pc_shift``,
+            map), ``error``, ``loaded_template``, ``loaded_exp``, ``loaded_exp_t`` and
+            ``partial_exp_t`` (creation times of the two matched experiences), ``pc_shift``,
             ``transform`` (dth, tx, ty), ``templates_added``, ``experiences_added``,
             ``time_s``.
         snapshots: per merge: ``loaded`` and ``partial`` experience poses (N, 3) before
@@ -90,8 +98,17 @@ class MultiSessionRatSLAM:
         session: str = "session",
         keep_snapshots: bool = True,
         merge_options: dict[str, Any] | None = None,
+        merge_threshold: float | None = None,
+        merge_persist: int = 1,
         **ratslam_kwargs: Any,
     ) -> None:
+        if merge_threshold is not None and not merge_threshold > 0:
+            raise ConfigError(f"merge_threshold must be > 0 (or None), got {merge_threshold!r}")
+        if int(merge_persist) < 1:
+            raise ConfigError(f"merge_persist must be >= 1, got {merge_persist!r}")
+        self.merge_threshold = None if merge_threshold is None else float(merge_threshold)
+        self.merge_persist = int(merge_persist)
+        self._streak = (-1, 0)  # (stored map, consecutive new templates matching it)
         self.merge_options = dict(merge_options or {})
         self.slam = RatSLAM(config, **ratslam_kwargs)
         self.stored = [
@@ -187,8 +204,19 @@ class MultiSessionRatSLAM:
             return result
         template = self.slam.local_view.templates[int(result.view.template_id)]
         k, tid, offset, err = self.match_stored(template)
-        if k < 0 or err > self.slam.config.local_view.vt_match_threshold:
+        threshold = (
+            self.slam.config.local_view.vt_match_threshold
+            if self.merge_threshold is None
+            else self.merge_threshold
+        )
+        if k < 0 or err > threshold:
+            self._streak = (-1, 0)
             return result
+        streak = self._streak[1] + 1 if self._streak[0] == k else 1
+        self._streak = (k, streak)
+        if streak < self.merge_persist:
+            return result
+        self._streak = (-1, 0)
         self.merge_with(k, tid, offset=offset, error=err, frame=result.frame)
         n_t, n_e, _ = self.slam.counts()
         return dataclasses.replace(
@@ -249,6 +277,12 @@ class MultiSessionRatSLAM:
             "error": float(error),
             "loaded_template": int(loaded_template),
             "loaded_exp": int(res.info["loaded_exp"]),
+            "loaded_exp_t": float(loaded.exp_t[int(res.info["loaded_exp"])]),
+            "partial_exp_t": (
+                float(partial.exp_t[int(res.info["partial_exp"])])
+                if int(res.info["partial_exp"]) >= 0
+                else float("nan")
+            ),
             "pc_shift": res.info["pc_shift"],
             "pc_shift_applied": res.info["pc_shift_applied"],
             "transform": [float(v) for v in res.info["transform"]],

@@ -526,3 +526,27 @@ def test_cli_merge_options_select_the_readings(tmp_path, capsys):
         kw = {"match_exp": "nearest", "exp_pc_shift": "templates"} if opts else {}
         want = merge_maps(loaded, partial, 2, **kw).state
         assert np.array_equal(load_state(out, load_config(cfg)).exp_pc, want.exp_pc)
+
+
+def test_rotated_pose_cell_shift_by_hand():
+    """pc_shift_rotate: offsets from the matched cells turn with the heading shift."""
+    from torchratslam.maps.merge import _rotate_shift
+
+    dims = np.array([10.0, 10.0, 36.0])
+    src, dst = np.array([1.0, 1.0, 0.0]), np.array([5.0, 5.0, 9.0])  # +9 th cells = +90 deg
+    pcs = np.array([[2.0, 1.0, 3.0], [1.0, 0.0, 35.0], [9.0, 1.0, 0.0]])  # (+1,0), (0,-1), (-2,0)
+    got = _rotate_shift(pcs, src, dst, dims)
+    want = np.array([[5.0, 6.0, 12.0], [6.0, 5.0, 8.0], [5.0, 3.0, 9.0]])
+    assert np.allclose(got, want, atol=1e-12)
+    # no heading shift: the paper's translation
+    dst0 = np.array([5.0, 5.0, 0.0])
+    assert np.allclose(_rotate_shift(pcs, src, dst0, dims), np.mod(pcs + dst0 - src, dims))
+
+
+def test_rotated_shift_without_heading_change_equals_the_papers_shift():
+    rng = np.random.default_rng(3)
+    loaded, partial, _ = split(rng, pc_off=(5.4, 7.9, 0.0))
+    a = merge_maps(loaded, partial, loaded_template=2).state
+    b = merge_maps(loaded, partial, loaded_template=2, pc_shift_rotate=True).state
+    assert np.allclose(a.template_pc, b.template_pc, atol=1e-9)
+    assert np.allclose(a.exp_pc, b.exp_pc, atol=1e-9)

@@ -1,0 +1,135 @@
+"""Issue 18: merges that hold across seeds (the per-seed check, two seeds), the merge
+options (a stricter threshold for stored maps, persistence) and the seed parsing."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+from torchratslam.graph.errors import ConfigError
+
+from torchratslam.config import load_config
+from torchratslam.experiments.multisession_tour import (
+    ABLATION_MARGIN,
+    SEED_TOLERANCE,
+    WRONG_PLACE_M,
+    merge_distances,
+    seed_table,
+    seed_table_markdown,
+)
+from torchratslam.multisession.session import MultiSessionRatSLAM
+from torchratslam.pipeline import RatSLAM
+from torchratslam.sim import get_tour
+
+torch.set_num_threads(1)
+
+CONFIG = load_config("virtual_tour")
+
+
+def test_parse_seeds():
+    from torchratslam.cli.multisession import parse_seeds
+
+    assert parse_seeds("0-9") == list(range(10))
+    assert parse_seeds("1,3,5-6") == [1, 3, 5, 6]
+    for bad in ("", "a-b", "1-x"):
+        with pytest.raises(ConfigError, match="--seeds"):
+            parse_seeds(bad)
+
+
+def test_merge_distances_by_hand():
+    gt = np.array([[0.0, 0, 0, 0], [1.0, 3, 4, 0], [2.0, 3, 5, 0]])
+    merges = [
+        {"loaded_exp_t": 0.1, "partial_exp_t": 1.2},  # (0,0) vs (3,4): 5 m
+        {"loaded_exp_t": 1.6, "partial_exp_t": 2.0},  # (3,5) vs (3,5): 0 m
+        {"loaded_exp_t": float("nan"), "partial_exp_t": 2.0},
+    ]
+    d = merge_distances(merges, gt)
+    assert d[0] == pytest.approx(5.0) and d[1] == pytest.approx(0.0) and np.isnan(d[2])
+
+
+def test_bad_merge_options_are_config_errors():
+    with pytest.raises(ConfigError, match="merge_threshold"):
+        MultiSessionRatSLAM(CONFIG, merge_threshold=0.0)
+    with pytest.raises(ConfigError, match="merge_persist"):
+        MultiSessionRatSLAM(CONFIG, merge_persist=0)
+
+
+@pytest.fixture(scope="module")
+def stored():
+    tour = get_tour("virtual_tour")
+    slam = RatSLAM(CONFIG)
+    slam.run(tour.sessions[0].frames(), progress=False)
+    from torchratslam.maps.state import state_from_slam
+
+    return tour, state_from_slam(slam)
+
+
+def _first_merge(tour, state, **kw):
+    ms = MultiSessionRatSLAM(CONFIG, [state], session="session2", **kw)
+    ms.run(tour.sessions[1].frames(0, 45), progress=False)
+    return ms.merges[0] if ms.merges else None
+
+
+@pytest.mark.slow
+def test_stricter_threshold_and_persistence_delay_the_merge(stored):
+    """A merge that needs a smaller match error, or several matching new templates in a
+    row, cannot come earlier than the paper's first match, and comes with a smaller error
+    (threshold) or later (persistence)."""
+    tour, state = stored
+    paper = _first_merge(tour, state)
+    assert paper is not None and paper["error"] <= CONFIG.local_view.vt_match_threshold
+    strict = _first_merge(tour, state, merge_threshold=0.8 * paper["error"])
+    assert strict is None or (
+        strict["frame"] > paper["frame"] and strict["error"] <= 0.8 * paper["error"]
+    )
+    persist = _first_merge(tour, state, merge_persist=2)
+    assert persist is None or persist["frame"] > paper["frame"]
+
+
+def test_cli_seeds_prints_and_writes_the_table(tmp_path, capsys):
+    import json
+
+    from torchratslam.cli import main
+
+    out = tmp_path / "seeds"
+    code = main(
+        [
+            "multisession",
+            "--tour",
+            "sim:virtual_tour",
+            "--out",
+            str(out),
+            "--seeds",
+            "0-1",
+            "--max-frames",
+            "25",
+            "--ablation",
+        ]
+    )
+    assert code == 0
+    table = json.loads((out / "seeds.json").read_text())
+    assert table["seeds"] == [0, 1]
+    for row in table["rows"].values():
+        assert {"single", "multi", "ablation", "diff", "merges", "wrong_merges"} <= set(row)
+    text = (out / "seeds.md").read_text()
+    assert "| multi / single |" in text and "ablation" in text
+    captured = capsys.readouterr()
+    assert "seed 1 (2/2)" in captured.err  # progress
+    assert "| multi / single |" in captured.out
+
+
+@pytest.mark.slow
+def test_two_seeds_hold_with_the_rotated_pose_cell_shift():
+    """The per-seed check on two seeds of the virtual tour, the paper's parameters and
+    the rotated pose-cell shift: the merged map has as many experiences as the continuous
+    single session (within 2%), the ablation without the shift at least 10% more, and
+    both merges join experiences less than 1 m apart in ground truth. (With the paper's
+    translation the same seeds give 51/48 and 35/34: measured, docs/multisession.md.)"""
+    table = seed_table("sim:virtual_tour", [3, 8], merge_options={"pc_shift_rotate": True})
+    for seed, row in table["rows"].items():
+        assert abs(row["diff"]) <= SEED_TOLERANCE, (seed, row)
+        assert row["ablation_diff"] >= ABLATION_MARGIN, (seed, row)
+        assert row["merges"] and all(m["distance_m"] <= WRONG_PLACE_M for m in row["merges"])
+    assert table["within"] == 2 and table["ablation_above"] == 2 and table["wrong_merges"] == 0
+    text = seed_table_markdown(table)
+    assert "| 3 | 8 |" in text and "2/2 seeds" in text
