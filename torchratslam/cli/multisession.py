@@ -88,21 +88,22 @@ def register(subparsers: Any) -> argparse.ArgumentParser:
         "--pc-shift-rotate",
         action="store_true",
         help="merge: rotate the partial map's pose-cell offsets by the heading shift "
-        "(default off: the paper's translation, Eq. 10); a deviation",
+        "(default off: the paper's translation, Eq. 10); a deviation, e.g. --pc-shift-rotate",
     )
     p.add_argument(
         "--merge-threshold",
         type=float,
         default=None,
         help="match error for a merge with a stored map (default: vt_match_threshold, "
-        "the paper's); a deviation when set",
+        "the paper's); a deviation when set, e.g. --merge-threshold 0.03",
     )
     p.add_argument(
         "--merge-persist",
         type=int,
         default=1,
         help="merge only after this many consecutive new templates match the same "
-        "stored map (default 1: the paper's first match); a deviation when > 1",
+        "stored map (default 1: the paper's first match); a deviation when > 1, e.g. "
+        "--merge-persist 2",
     )
     p.add_argument(
         "--max-frames",

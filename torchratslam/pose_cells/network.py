@@ -1339,8 +1339,11 @@ class PoseCellNetwork(nn.Module):
                 f"pose-cell activity has shape {tuple(a.shape)}, the network needs "
                 f"{tuple(self.activity.shape)} (check pc_dim_xy / pc_dim_th)"
             )
-        if not bool(torch.isfinite(a).all()) or bool((a < 0).any()):
-            raise MapFormatError("pose-cell activity must be finite and non-negative")
+        # finite, not necessarily non-negative: OpenRatSLAM's path integration (its
+        # one-cell weights, pc_multi_cell false) turns cells negative when the packet moves
+        # more than one cell in a step, and a map saved in that behaviour must load
+        if not bool(torch.isfinite(a).all()):
+            raise MapFormatError("pose-cell activity must be finite (a NaN or inf was found)")
         with torch.no_grad():
             self.activity.copy_(a.to(self.dtype))
         self._occ = None
