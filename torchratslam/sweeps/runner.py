@@ -189,6 +189,10 @@ def batch_key(run: RunSpec) -> tuple | None:
         return None
     if config.general.pose_cells != "ratslam":
         return None
+    # the replay shares one torch network and replays every frame's action: OpenRatSLAM's
+    # behaviour (numpy step for one network, no step at frame 0) runs alone
+    if config.pose_cells.pc_engine != "torch" or config.general.skip_first_odometry:
+        return None
     flat = config.to_flat()
     em_keys = set(type(config.experience_map).keys())
     shared = tuple(
@@ -233,6 +237,11 @@ class _SlotNetwork:
 
     def step(self, vtrans: Any, vrot: Any, dt: Any = 1.0) -> Any:
         return self.centre_row
+
+    def step_one(self, vtrans: float, vrot: float, dt: float) -> tuple[float, float, float]:
+        """:meth:`step` as Python floats (what the pose-cell module calls)."""
+        c = self.step(vtrans, vrot, dt)[0].tolist()
+        return (c[0], c[1], c[2])
 
 
 class _ReplayView:

@@ -34,6 +34,7 @@ def test_batched_group_equals_separate_runs(cells, one_network):
         {
             "base": "virtual_tour",
             "set": {
+                "behaviour": "torchratslam",  # batching replays the project's behaviour
                 "pc_dim_xy": xy,
                 "pc_dim_th": th,
                 "exp_loops": 20,
@@ -69,6 +70,7 @@ def test_local_view_keys_split_groups():
     spec = from_dict(
         {
             "base": "virtual_tour",
+            "set": {"behaviour": "torchratslam"},
             "parameters": {"vt_match_threshold": [0.03, 0.05], "pc_vt_inject_energy": [0.1, 0.2]},
             "datasets": [DATA],
         }
@@ -79,3 +81,15 @@ def test_local_view_keys_split_groups():
     assert [[r.index for r in u] for u in units] == [[0, 1], [2, 3]]
     # every worker gets work: 4 runs on 4 workers are 4 units
     assert sorted(len(u) for u in make_units(runs, workers=4)) == [1, 1, 1, 1]
+
+
+def test_openratslams_behaviour_is_never_batched():
+    """OpenRatSLAM's behaviour (numpy step, no step at frame 0) runs each config alone."""
+    spec = from_dict(
+        {
+            "base": "virtual_tour",
+            "parameters": {"pc_vt_inject_energy": [0.02, 0.3]},
+            "datasets": [DATA],
+        }
+    )
+    assert all(batch_key(r) is None for r in spec.runs())
