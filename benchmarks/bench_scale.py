@@ -45,10 +45,10 @@ def profiles() -> list[tuple[str, list[str]]]:
     keys = RatSLAMConfig.key_owner()
     if "behaviour" in keys:
         return [
-            ("torchratslam, behaviour openratslam", ["behaviour=openratslam"]),
+            ("torchratslam, behaviour openratslam (the reference)", ["behaviour=openratslam"]),
             (
-                "torchratslam, behaviour torchratslam + alpha_local",
-                ["behaviour=torchratslam", "exp_backend=alpha_local"],
+                "torchratslam, recommended for long runs (openratslam + alpha_local)",
+                ["behaviour=openratslam", "exp_backend=alpha_local"],
             ),
         ]
     return [

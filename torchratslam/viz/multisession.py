@@ -153,6 +153,8 @@ def write_figures(result: dict[str, Any], out: Path) -> list[Path]:
     for name, draw in _panels(data):
         fig, ax = plt.subplots(figsize=(5, 5))
         draw(ax, data, report)
+        ax.set_xlabel("x (m)")
+        ax.set_ylabel("y (m)")
         ax.set_aspect("equal", adjustable="datalim")
         ax.autoscale_view()
         ax.legend(fontsize=7, loc="best")
