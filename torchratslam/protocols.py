@@ -15,14 +15,16 @@ modules only through them. The torch-free ones (experience map, relaxation backe
 from __future__ import annotations
 
 from collections.abc import Iterator
-from typing import Any, Protocol, runtime_checkable
+from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
 
 import numpy as np
-import torch
 
 from torchratslam.graph.messages import Action
 from torchratslam.graph.protocols import ExperienceMapModule, RelaxationBackend, Stateful
 from torchratslam.messages import Frame, ViewMatch
+
+if TYPE_CHECKING:  # annotations only: importing the protocols does not load torch
+    import torch
 
 __all__ = [
     "ExperienceMapModule",

@@ -191,9 +191,10 @@ def _set_threads(value: str) -> None:
         n = 0
     if n < 1:
         raise ConfigError(f"TORCHRATSLAM_THREADS must be a positive integer, got {value!r}")
-    import torch
-
-    torch.set_num_threads(n)
+    if "torch" in sys.modules:
+        sys.modules["torch"].set_num_threads(n)
+    else:  # torch reads these when it loads; not importing it keeps bad input fast
+        os.environ["OMP_NUM_THREADS"] = os.environ["MKL_NUM_THREADS"] = str(n)
 
 
 if __name__ == "__main__":  # pragma: no cover

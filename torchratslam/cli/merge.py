@@ -15,7 +15,6 @@ import json
 from typing import Any
 
 import numpy as np
-import torch
 
 from torchratslam.config import load_config
 from torchratslam.graph.errors import GraphError
@@ -92,6 +91,8 @@ def match_last_template(loaded: Any, partial: Any, config: Any) -> tuple[int, fl
         GraphError: the partial map is empty or no loaded template is under
             ``vt_match_threshold``.
     """
+    import torch
+
     from torchratslam.local_view.view import LocalView
     from torchratslam.maps.merge import pick_experience
 

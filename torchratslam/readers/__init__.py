@@ -1,35 +1,34 @@
-"""Readers: datasets (image folders, videos, ROS 1/2 bags, CSV odometry) and visual odometry."""
+"""Readers: datasets (image folders, videos, ROS 1/2 bags, CSV odometry) and visual odometry.
 
-from torchratslam.readers.bags import BagReader
-from torchratslam.readers.datasets import (
-    IMAGE_EXTENSIONS,
-    VIDEO_EXTENSIONS,
-    DirectoryReader,
-    Reader,
-    VideoReader,
-    open_data,
-    read_groundtruth_csv,
-    read_odometry_csv,
-)
-from torchratslam.readers.visual_odometry import (
-    GivenOdometry,
-    VisualOdometry,
-    best_shift,
-    intensity_profile,
-)
+The names load on first use, so a light import (``torchratslam.readers.limits``, the
+CLI's parser) does not pull in torch.
+"""
 
-__all__ = [
-    "IMAGE_EXTENSIONS",
-    "VIDEO_EXTENSIONS",
-    "BagReader",
-    "DirectoryReader",
-    "GivenOdometry",
-    "Reader",
-    "VideoReader",
-    "VisualOdometry",
-    "best_shift",
-    "intensity_profile",
-    "open_data",
-    "read_groundtruth_csv",
-    "read_odometry_csv",
-]
+from __future__ import annotations
+
+import importlib
+from typing import Any
+
+_HOMES = {
+    "BagReader": "bags",
+    "IMAGE_EXTENSIONS": "datasets",
+    "VIDEO_EXTENSIONS": "datasets",
+    "DirectoryReader": "datasets",
+    "Reader": "datasets",
+    "VideoReader": "datasets",
+    "open_data": "datasets",
+    "read_groundtruth_csv": "datasets",
+    "read_odometry_csv": "datasets",
+    "GivenOdometry": "visual_odometry",
+    "VisualOdometry": "visual_odometry",
+    "best_shift": "visual_odometry",
+    "intensity_profile": "visual_odometry",
+}
+
+__all__ = sorted(_HOMES)
+
+
+def __getattr__(name: str) -> Any:
+    if name in _HOMES:
+        return getattr(importlib.import_module(f"{__name__}.{_HOMES[name]}"), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
