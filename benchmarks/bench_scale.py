@@ -45,9 +45,9 @@ def profiles() -> list[tuple[str, list[str]]]:
     keys = RatSLAMConfig.key_owner()
     if "behaviour" in keys:
         return [
-            ("torchratslam, behaviour openratslam (the reference)", ["behaviour=openratslam"]),
+            ("torchratslam (openratslam)", ["behaviour=openratslam"]),
             (
-                "torchratslam, recommended for long runs (openratslam + alpha_local)",
+                "torchratslam (openratslam + alpha_local)",
                 ["behaviour=openratslam", "exp_backend=alpha_local"],
             ),
         ]

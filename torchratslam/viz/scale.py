@@ -26,7 +26,7 @@ def plot_scale(
     """
     import matplotlib.pyplot as plt
 
-    fig, (ax, bx) = plt.subplots(1, 2, figsize=(11, 4.2))
+    fig, (ax, bx) = plt.subplots(1, 2, figsize=(12, 6))
     styles = ["-", "--", ":", "-."]
     for i, (name, rep) in enumerate(reports.items()):
         parts = rep["parts"]
@@ -49,16 +49,16 @@ def plot_scale(
     ax.set_title("cost per frame against map size")
     ax.set_ylim(bottom=0)
     ax.grid(alpha=0.3)
-    ax.legend(fontsize=8)
+    ax.legend(fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.14))
     bx.set_xlabel("frame (middle of each tenth)")
     bx.set_ylabel("mean cost per frame (ms)")
     bx.set_title("per module")
     bx.set_ylim(bottom=0)
     bx.grid(alpha=0.3)
-    bx.legend(fontsize=7, ncol=2)
+    bx.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.14))
     if title:
         fig.suptitle(title)
-    fig.tight_layout()
+    fig.subplots_adjust(bottom=0.42, wspace=0.25, left=0.06, right=0.98)
     out = save_figure(fig, path)
     plt.close(fig)
     return out
