@@ -115,8 +115,24 @@ def _icp_overlay(ax: Any, data: dict[str, Any], report: dict[str, Any]) -> None:
 
 
 def _ablation(ax: Any, data: dict[str, Any], report: dict[str, Any]) -> None:
+    """Fig. 12: the map made without the pose-cell shift over the multisession map, its
+    duplicates (a second experience of a template that already had one) marked."""
     abl, final = data["ablation"]["maps"][-1], data["multi"]["maps"][-1]
+    _draw(ax, final.exp_pose, _links(final), "0.7", "multisession, with the shift")
     _draw(ax, abl.exp_pose, _links(abl), "tab:red", "no pose-cell shift")
+    tpl = np.asarray(abl.exp_template, np.int64)
+    first = np.unique(tpl, return_index=True)[1]
+    dup = np.setdiff1d(np.arange(len(tpl)), first)
+    if dup.size:
+        ax.scatter(
+            abl.exp_pose[dup, 0],
+            abl.exp_pose[dup, 1],
+            s=60,
+            marker="x",
+            color="black",
+            label=f"duplicates: a template's second experience ({dup.size})",
+            zorder=4,
+        )
     ax.set_title(f"ablation: {abl.n_experiences} experiences vs {final.n_experiences}")
 
 
