@@ -21,7 +21,7 @@ GOLDEN = ROOT / "tests" / "data" / "layout_golden"
 #: Config overrides that select the behaviour the goldens were recorded with (the
 #: project's own pre-issue-12 behaviour: the "torchratslam" profile, which also picks
 #: the pose cells' batched torch step whose float32 rounding the goldens were made with).
-BEHAVIOUR_OVERRIDES: list[str] = ["behaviour=torchratslam"]
+BEHAVIOUR_OVERRIDES: list[str] = ["behaviour=torchratslam_v0"]
 
 RUNS = [("virtual_tour", "virtual_tour"), ("lab_tour", "lab_tour"), ("irat_like", "irat")]
 

@@ -4,9 +4,10 @@ Keys are named exactly as in OpenRatSLAM (``shared/reference/parameters.md``); a
 that is absent takes OpenRatSLAM's default. The key space is flat, as in OpenRatSLAM's
 own config files: :func:`load_config` routes each key to the module that owns it.
 
-Behaviour profiles (``behaviour: openratslam``, the default, or ``torchratslam``) set
-the keys of :data:`PROFILES` that a config does not set itself: OpenRatSLAM exactly, or
-the project's own choices (``docs/openratslam-fidelity.md``).
+Behaviour profiles (``behaviour: openratslam``, the default, ``torchratslam`` or
+``torchratslam_v0``) set the keys of :data:`PROFILES` that a config does not set itself:
+OpenRatSLAM exactly, the recommended choices, or the project's behaviour before issue 12
+(``docs/openratslam-fidelity.md``).
 
 Example:
     >>> from torchratslam.config import load_config
@@ -71,9 +72,10 @@ class GeneralParams(Params):
     odometry: str = param("given", "odometry source: given | visual (registry.ODOMETRY)")
     behaviour: str = param(
         "openratslam",
-        "behaviour profile: openratslam (exactly OpenRatSLAM) | torchratslam (the project's "
-        "own choices); sets every key of PROFILES that the config does not set itself",
-        choices=("openratslam", "torchratslam"),
+        "behaviour profile: openratslam (exactly OpenRatSLAM) | torchratslam (the "
+        "recommended choices) | torchratslam_v0 (the project before issue 12); sets every "
+        "key of PROFILES that the config does not set itself",
+        choices=("openratslam", "torchratslam", "torchratslam_v0"),
     )
     skip_first_odometry: bool = param(
         True,
@@ -203,7 +205,8 @@ class VisualOdometryParams(Params):
 
 # Behaviour profiles (issue 12): ``behaviour: NAME`` sets each of these keys unless the
 # config sets it itself. "openratslam" is OpenRatSLAM exactly (the defaults of the
-# dataclasses); "torchratslam" is the project's own behaviour before issue 12.
+# dataclasses); "torchratslam" the recommended choices; "torchratslam_v0" the project's
+# own behaviour before issue 12 (to reproduce maps made with those versions).
 # docs/openratslam-fidelity.md gives every key's measured effect.
 PROFILES: dict[str, dict[str, Any]] = {
     "openratslam": {
@@ -220,7 +223,23 @@ PROFILES: dict[str, dict[str, Any]] = {
         "exp_link_time": "since_start",
         "exp_relax_order": "openratslam",
     },
+    # the recommended bundle: OpenRatSLAM plus the choices measured to be as good or
+    # better on every simulated set (docs/openratslam-fidelity.md, "When to use which")
     "torchratslam": {
+        "pc_decode": "exact",
+        "vt_inject_rule": "openratslam",
+        "pc_axis": "math",
+        "pc_wrap": "preserve_mass",
+        "pc_multi_cell": True,
+        "pc_engine": "auto",
+        "skip_first_odometry": False,
+        "action_angle": "injection",
+        "exp_relax": "on_action",
+        "exp_first_at_origin": True,
+        "exp_link_time": "per_link",
+        "exp_relax_order": "openratslam",
+    },
+    "torchratslam_v0": {
         "pc_decode": "exact",
         "vt_inject_rule": "last_10",
         "pc_axis": "math",

@@ -165,24 +165,28 @@ def _switches(cfg: RatSLAMConfig) -> dict:
 def test_the_default_behaviour_is_openratslam_and_a_profile_sets_every_switch():
     from torchratslam.config import PROFILES
 
-    assert set(PROFILES) == {"openratslam", "torchratslam"}
+    assert set(PROFILES) == {"openratslam", "torchratslam", "torchratslam_v0"}
     assert set(PROFILES["openratslam"]) == set(PROFILES["torchratslam"])
+    assert set(PROFILES["openratslam"]) == set(PROFILES["torchratslam_v0"])
     owner = RatSLAMConfig.key_owner()
     assert set(PROFILES["openratslam"]) <= set(owner)  # every switch is a real key
     default = load_config()
     assert default.general.behaviour == "openratslam"
     assert _switches(default) == PROFILES["openratslam"]
     assert _switches(RatSLAMConfig()) == PROFILES["openratslam"]  # the dataclass defaults
-    own = load_config(behaviour="torchratslam")
-    assert _switches(own) == PROFILES["torchratslam"]
-    for key, value in PROFILES["torchratslam"].items():  # each key lands in its module
-        assert getattr(getattr(own, owner[key]), key) == value
-    assert own.experience_map.exp_relax == "every_frame"
+    for name in ("torchratslam", "torchratslam_v0"):
+        own = load_config(behaviour=name)
+        assert _switches(own) == PROFILES[name]
+        for key, value in PROFILES[name].items():  # each key lands in its module
+            assert getattr(getattr(own, owner[key]), key) == value
+    assert load_config(behaviour="torchratslam_v0").experience_map.exp_relax == "every_frame"
+    rec = load_config(behaviour="torchratslam")  # the recommended bundle
+    assert rec.experience_map.exp_relax == "on_action" and rec.pose_cells.pc_multi_cell
 
 
 def test_explicit_keys_override_the_profile(tmp_path: Path):
     p = tmp_path / "c.yaml"
-    p.write_text("behaviour: torchratslam\nexp_relax: on_action\npc_dim_xy: 15\n")
+    p.write_text("behaviour: torchratslam_v0\nexp_relax: on_action\npc_dim_xy: 15\n")
     cfg = load_config(p)
     assert cfg.experience_map.exp_relax == "on_action"  # the file's own key wins
     assert cfg.experience_map.exp_relax_order == "colour"  # the rest from the profile
@@ -194,7 +198,8 @@ def test_explicit_keys_override_the_profile(tmp_path: Path):
     back = cfg.replace(behaviour="openratslam")
     assert back.general.behaviour == "openratslam" and back.general.skip_first_odometry
     assert back.experience_map.exp_relax_order == "openratslam"
-    assert load_config().replace(behaviour="torchratslam") == load_config(behaviour="torchratslam")
+    for name in ("torchratslam", "torchratslam_v0"):
+        assert load_config().replace(behaviour=name) == load_config(behaviour=name)
     # the saved flat form reloads to the same config
     assert RatSLAMConfig.from_flat(cfg.to_flat()) == cfg
 

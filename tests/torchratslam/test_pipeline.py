@@ -138,9 +138,9 @@ def test_per_frame_order_is_the_references():
     assert [e[0] for e in log] == ["lv", "pc_vt", "pc_odo", "em_odo", "em_apply"]
 
 
-def test_per_frame_order_of_the_torchratslam_behaviour():
+def test_per_frame_order_of_the_torchratslam_v0_behaviour():
     log = Log()
-    slam = _fake_slam(log, behaviour="torchratslam")
+    slam = _fake_slam(log, behaviour="torchratslam_v0")
     for f in _frames(3):
         slam.step_frame(f)
     per_frame = [e[0] for e in log]

@@ -416,7 +416,10 @@ class TemplateMatcher:
                 )
             offs = torch.arange(0, 2 * shift + 1, step)
         self.offsets = offs.to(device)
+        self._offsets_np = offs.numpy().astype(np.int64)
         self.n_offsets = int(offs.numel())
+        # the last stage by compiled early-exit sums on the CPU (False: torch chunks)
+        self.compiled = True
         self.npix = y_size * self.width
         # panoramic: the view rolled so that its column c - o faces template column c
         cols = torch.arange(x_size)
@@ -704,6 +707,29 @@ class TemplateMatcher:
         if t.numel():
             order = torch.argsort(lb, stable=True)
             lb, t, k = lb[order], t[order], k[order]
+        if t.numel() and self.compiled and bank._data.device.type == "cpu":
+            # screened by the compiled early-exit sums; the pairs it keeps are evaluated
+            # exactly here, so the answer is the same
+            from torchratslam.local_view._sad import screen_pairs
+
+            sad64, best64, low = screen_pairs(
+                bank._data.numpy(),
+                np.ascontiguousarray(view.numpy()),
+                t.numpy(),
+                k.numpy(),
+                lb.double().numpy(),
+                self._offsets_np,
+                self.panoramic,
+                self.width,
+                self.shift,
+                best[0],
+                cap,
+                margin,
+            )
+            pruned = min(pruned, low)
+            sel = torch.from_numpy(sad64 <= min(best64, cap) + margin)
+            evaluate(t[sel], k[sel])
+        elif t.numel():
             s, size = 0, 16
             per = max(64, CHUNK_ELEMENTS // (self.y_size * self.x_size))
             while s < t.numel():

@@ -23,7 +23,7 @@ from torchratslam.pipeline import RatSLAM
 from torchratslam.readers.datasets import open_data
 
 SMALL = """\
-behaviour: torchratslam
+behaviour: torchratslam_v0
 template_x_size: 32
 template_y_size: 8
 vt_panoramic: 1

@@ -125,13 +125,13 @@ def test_two_seeds_hold_with_the_rotated_pose_cell_shift():
     single session (within 2%), the ablation without the shift at least 10% more, and
     both merges join experiences less than 1 m apart in ground truth. (With the paper's
     translation the same seeds give 51/48 and 35/34: measured, docs/multisession.md.)
-    Measured in the project's behaviour (``behaviour=torchratslam``, the issue-18 runs);
+    Measured in the project's behaviour (``behaviour=torchratslam_v0``, the issue-18 runs);
     OpenRatSLAM's default behaviour skips each session's first odometry message."""
     table = seed_table(
         "sim:virtual_tour",
         [3, 8],
         merge_options={"pc_shift_rotate": True},
-        overrides={"behaviour": "torchratslam"},
+        overrides={"behaviour": "torchratslam_v0"},
     )
     for seed, row in table["rows"].items():
         assert abs(row["diff"]) <= SEED_TOLERANCE, (seed, row)

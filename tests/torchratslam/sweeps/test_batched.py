@@ -34,7 +34,7 @@ def test_batched_group_equals_separate_runs(cells, one_network):
         {
             "base": "virtual_tour",
             "set": {
-                "behaviour": "torchratslam",  # batching replays the project's behaviour
+                "behaviour": "torchratslam_v0",  # batching: the torch pose-cell step (pc_engine: torch)
                 "pc_dim_xy": xy,
                 "pc_dim_th": th,
                 "exp_loops": 20,
@@ -70,7 +70,7 @@ def test_local_view_keys_split_groups():
     spec = from_dict(
         {
             "base": "virtual_tour",
-            "set": {"behaviour": "torchratslam"},
+            "set": {"behaviour": "torchratslam_v0"},
             "parameters": {"vt_match_threshold": [0.03, 0.05], "pc_vt_inject_energy": [0.1, 0.2]},
             "datasets": [DATA],
         }

@@ -12,7 +12,7 @@ from torchratslam.cli import main  # noqa: E402
 from torchratslam.viz.rerun_viewer import ENTITIES  # noqa: E402
 
 SMALL = """\
-behaviour: torchratslam
+behaviour: torchratslam_v0
 template_x_size: 32
 template_y_size: 8
 vt_panoramic: 1
