@@ -92,3 +92,117 @@ def screen_pairs(  # pragma: no cover - compiled
         if s < best:
             best = s
     return sad, best, pruned
+
+
+# bound sums may be reassociated (vectorised): the search's margin covers their rounding
+_BOUND_MATH = {"reassoc", "nsz", "contract"}
+
+
+@njit(cache=True, nogil=True, fastmath=_BOUND_MATH)
+def search_normal(  # pragma: no cover - compiled
+    data: np.ndarray,
+    cols: np.ndarray,
+    pairs: np.ndarray,
+    n: int,
+    view: np.ndarray,
+    vcols: np.ndarray,
+    vpairs: np.ndarray,
+    offsets: np.ndarray,
+    width: int,
+    shift: int,
+    hint: int,
+    best0: float,
+    cap: float,
+    margin: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, int, float, float]:
+    """Normal mode: every (template, offset) pair through three stages of elimination.
+
+    Per pair, the L1 distance between the sums of pairs of compared columns (the view's
+    ``vpairs`` against the template's ``pairs[t, k]``, contiguous per template), then
+    between the compared columns' sums (``vcols`` against ``cols[t, o:o + width]``):
+    lower bounds of the pair's SAD by the triangle inequality, each tighter than the
+    last; then, if both are within the cut, the float64 SAD itself, row by row with
+    early exit. The hint template goes first (its error
+    sets a tight cut early), then every template in id order. As
+    :func:`screen_pairs`, it only screens: the pairs it returns are evaluated again
+    exactly by the caller.
+
+    Args:
+        data: the bank's rows, ``(capacity, Y, X)``.
+        cols: each template's column sums, ``(capacity, X)``.
+        pairs: each template's compared window at each offset, its column sums summed
+            in blocks of two columns, ``(capacity, K * B)``.
+        n: templates in the bank.
+        view: the view template, ``(Y, X)``.
+        vcols: the column sums of the view's compared columns ``shift .. shift +
+            width - 1``, ``(width,)``.
+        vpairs: ``vcols`` summed in the same blocks, ``(B,)``.
+        offsets: the column offset of each offset index, ``(K,)``.
+        width: compared columns.
+        shift: first compared view column.
+        hint: a template id to try first (-1: none).
+        best0: the best SAD already known (``inf`` if none).
+        cap: the threshold in SAD units (``inf``: none).
+        margin: rounding allowance added to every cut.
+
+    Returns:
+        ``(t, k, sad, m, best, pruned)``: the first ``m`` entries of ``t``, ``k`` and
+        ``sad`` are the pairs screened to the end and their float64 SADs (in the order
+        visited), ``best`` the least of those SADs (or ``best0``), ``pruned`` the least
+        lower bound of every pair abandoned (bound, or partial sum less ``margin``).
+    """
+    kk = offsets.shape[0]
+    nb = vpairs.shape[0]
+    ny = view.shape[0]
+    out_t = np.empty(n * kk, np.int64)
+    out_k = np.empty(n * kk, np.int64)
+    out_s = np.empty(n * kk, np.float64)
+    m = 0
+    best = best0
+    pruned = np.inf
+    for j in range(n + 1):
+        if j == 0:
+            if hint < 0 or hint >= n:
+                continue
+            t = hint
+        else:
+            t = j - 1
+            if t == hint:
+                continue
+        for ki in range(kk):
+            cut = min(best, cap) + margin
+            o = offsets[ki]
+            b = pairs[t, 0] * 0
+            base = ki * nb
+            for j in range(nb):
+                b += abs(pairs[t, base + j] - vpairs[j])
+            if b > cut:
+                if b < pruned:
+                    pruned = b
+                continue
+            b = cols[t, 0] * 0
+            for c in range(width):
+                b += abs(cols[t, o + c] - vcols[c])
+            if b > cut:
+                if b < pruned:
+                    pruned = b
+                continue
+            s = 0.0
+            out = False
+            for y in range(ny):
+                for c in range(width):
+                    s += abs(np.float64(data[t, y, o + c]) - np.float64(view[y, shift + c]))
+                if s > cut:
+                    out = True
+                    break
+            if out:
+                if s - margin < pruned:
+                    pruned = s - margin
+                continue
+            out_t[m] = t
+            out_k[m] = ki
+            out_s[m] = s
+            m += 1
+            if s < best:
+                best = s
+    return out_t, out_k, out_s, m, best, pruned

@@ -243,6 +243,8 @@ class TemplateBank:
     _means: torch.Tensor
     _gsort: torch.Tensor
     _pool: torch.Tensor
+    _cols: torch.Tensor
+    _pairs: torch.Tensor
 
     def __init__(
         self,
@@ -443,7 +445,16 @@ class TemplateMatcher:
             shifted = torch.zeros(self.n_offsets, x_size, nb, dtype=torch.float64)
             for k, o in enumerate(offs.tolist()):
                 shifted[k, o : o + self.width] = blocks
+        # blocks of two columns of the compared width, placed at every offset (normal)
+        self.pair_blocks = nb2 = max(1, self.width // 2)
+        shifted2 = torch.zeros(x_size, self.n_offsets, nb2, dtype=torch.float64)
+        if not self.panoramic:
+            for j, c in enumerate(torch.tensor_split(torch.arange(self.width), nb2)):
+                for k, o in enumerate(offs.tolist()):
+                    shifted2[c + o, k, j] = 1
         self._mats = {
+            "shifted2": shifted2.reshape(x_size, -1).to(device),
+            "blocks2": shifted2[:, 0, :][int(offs[0]) : int(offs[0]) + self.width].to(device),
             "groups": groups.to(device),
             "blocks": blocks.to(device),
             "shifted": shifted.permute(1, 0, 2).reshape(x_size, -1).to(device),
@@ -456,7 +467,11 @@ class TemplateMatcher:
         if self.panoramic:
             shapes = {"gsort": (g * x,), "pool": (g * nb,)}
         else:
-            shapes = {"pool": (self.n_offsets * g * nb,)}
+            shapes = {
+                "pool": (self.n_offsets * g * nb,),
+                "cols": (x,),
+                "pairs": (self.n_offsets * self.pair_blocks,),
+            }
         return TemplateBank(
             self.y_size,
             x,
@@ -484,7 +499,14 @@ class TemplateMatcher:
                 "pool": (gsum @ self._mat("blocks", t.dtype)).reshape(m, -1),
             }
         pool = (gsum @ self._mat("shifted", t.dtype)).view(m, g, self.n_offsets, nb)
-        return {"pool": pool.permute(0, 2, 1, 3).reshape(m, -1)}  # (M, K, G, B)
+        # (M, K, G, B); and for the compiled search's bounds, the column sums (M, X) and
+        # the compared window's column sums in blocks of two at every offset (M, K * B2)
+        cols = t.sum(1)
+        return {
+            "pool": pool.permute(0, 2, 1, 3).reshape(m, -1),
+            "cols": cols,
+            "pairs": cols @ self._mat("shifted2", t.dtype),
+        }
 
     def _mat(self, name: str, dtype: torch.dtype) -> torch.Tensor:
         key = (name, dtype)
@@ -686,6 +708,35 @@ class TemplateMatcher:
                 pruned = min(pruned, float(bound.masked_fill(ok, math.inf).min()))
             return ok
 
+        if not self.panoramic and self.compiled and bank._data.device.type == "cpu":
+            # every pair through the compiled column-sum bound and early-exit sums; the
+            # pairs it keeps are evaluated exactly here, so the answer is the same
+            from torchratslam.local_view._sad import search_normal
+
+            vcols = parts["block"].sum(0)
+            vpairs = vcols @ self._mat("blocks2", vcols.dtype)
+            pt, pk, ps, m, best64, low = search_normal(
+                bank._data.numpy(),
+                bank._cols.numpy(),
+                bank._pairs.numpy(),
+                n,
+                np.ascontiguousarray(view.numpy()),
+                np.ascontiguousarray(vcols.numpy()),
+                np.ascontiguousarray(vpairs.numpy()),
+                self._offsets_np,
+                self.width,
+                self.shift,
+                hint if 0 <= hint < n else -1,
+                math.inf,
+                cap,
+                margin,
+            )
+            pruned = low
+            sel = ps[:m] <= min(best64, cap) + margin
+            evaluate(torch.from_numpy(pt[:m][sel]), torch.from_numpy(pk[:m][sel]))
+            if best[0] > cap:
+                return -1, 0, min(best[0], pruned) / self.npix
+            return best[1], int(self.offsets[best[2]]), best[0] / self.npix
         all_k = torch.arange(kk, device=dev)
         if self.panoramic:
             tb = self.template_bound(bank, parts)  # (N,)

@@ -489,3 +489,35 @@ def test_registered_in_local_views():
     lv = LOCAL_VIEWS.get("ratslam")(load_config("irat").local_view, dtype=torch.float32)
     assert lv.templates.shape == (0, 30, 50)
     assert lv.memory_bytes() >= lv.bank.capacity * 30 * 50 * 4
+
+
+@pytest.mark.parametrize("panoramic", [True, False])
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+def test_compiled_screening_gives_the_torch_search_bit_for_bit(panoramic, dtype):
+    """The compiled stages (numba, CPU) only skip pairs: every answer, error included,
+    is the one the torch chunks give, also with near-ties and thresholds."""
+    rng = np.random.default_rng(21)
+    y, x = 8, 24
+    bank = smooth_bank(rng, 400, y, x)
+    bank[200:260] = np.clip(bank[100:160] + 1e-4 * rng.standard_normal((60, y, x)), 0, 1)
+    lv = make_lv(y, x, panoramic=panoramic, shift=4, dtype=dtype)
+    lv.add_templates(bank)
+    assert lv.matcher is not None and lv.matcher.compiled  # the default on the CPU
+    views = [rng.random((y, x))]
+    for i in range(12):
+        t = bank[int(rng.integers(400))]
+        views.append(np.clip(np.roll(t, i % 5 - 2, -1) + 0.01 * rng.random((y, x)), 0, 1))
+    for v in views:
+        vt = torch.from_numpy(v).to(dtype)
+        for thr in (None, 0.01, 0.05):
+            lv.matcher.compiled = True
+            fast = lv.matcher.search(lv.bank, vt, hint=3, threshold=thr)
+            lv.matcher.compiled = False
+            slow = lv.matcher.search(lv.bank, vt, hint=3, threshold=thr)
+            assert fast[:2] == slow[:2]
+            if fast[0] >= 0:
+                assert fast[2] == slow[2]  # the same exact kernel decided both
+            else:  # both lower bounds of the best error, above the threshold
+                best = float(lv.errors(vt).min())
+                assert thr is not None and thr < fast[2] <= best + 1e-6
+    lv.matcher.compiled = True
