@@ -40,9 +40,18 @@ SHARED_TOOLS = Path(__file__).resolve().parents[1].parent / "shared" / "tools" /
 
 
 def profiles() -> list[tuple[str, list[str]]]:
-    """The torchratslam configurations measured: the reference behaviour and the
-    recommended profile with the local relaxation (where this version has them)."""
+    """The torchratslam configurations measured: the reference behaviour, the
+    recommended profile and the budgeted relaxation (where this version has them)."""
     keys = RatSLAMConfig.key_owner()
+    if "exp_relax_budget" in keys:
+        return [
+            ("torchratslam (openratslam)", ["behaviour=openratslam"]),
+            ("torchratslam (torchratslam, recommended)", ["behaviour=torchratslam"]),
+            (
+                "torchratslam (openratslam + exp_relax_budget=20000)",
+                ["behaviour=openratslam", "exp_relax_budget=20000"],
+            ),
+        ]
     if "behaviour" in keys:
         return [
             ("torchratslam (openratslam)", ["behaviour=openratslam"]),

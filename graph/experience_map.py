@@ -119,6 +119,7 @@ class ExperienceMap:
     # ------------------------------------------------------------------ storage
     def _clear(self) -> None:
         self._n = 0
+        self._relax_cursor = 0  # exp_relax_budget: the link the next relaxation starts at
         self._e = 0
         self._pose = np.zeros((0, 3))
         self._pc = np.zeros((0, 3))
@@ -348,6 +349,7 @@ class ExperienceMap:
             )
         k = self._e
         need = k + 1
+        before = self._links_version
         for name in self._LINK_FIELDS:
             setattr(self, f"_{name}", _grow(getattr(self, f"_{name}"), need))
         self._src[k] = src
@@ -365,8 +367,28 @@ class ExperienceMap:
         self._eidx[(src, dst)] = k
         self._g.add_edge(src, dst)  # its attributes are written when the graph is read
         self._dirty_edges.add(k)
-        self._order = None
+        self._append_reference(k, before)
         return True
+
+    def _append_reference(self, k: int, before: int) -> None:
+        """Insert new link ``k`` into the cached reference order (by source, then
+        creation) instead of sorting again: O(E) copies, no sort; the cache is dropped
+        when it was not current before the link was added."""
+        cached = self._ref_links
+        order = self._order
+        if cached is None or order is None or cached[0] != before or len(order) != k:
+            self._order = None
+            return
+        src = int(self._src[k])
+        # after every link of a source <= src: creation order within a source
+        at = int(np.searchsorted(cached[1], src, side="right"))
+        self._order = np.insert(order, at, k)
+        self._ref_links = (
+            self._links_version,
+            np.insert(cached[1], at, src),
+            np.insert(cached[2], at, int(self._dst[k])),
+            np.insert(cached[3], at, self._link[k, :3], axis=0),
+        )
 
     def remove_link(self, src: int, dst: int) -> None:
         """Delete the link ``src -> dst`` (exact direction); later links shift down one row."""
@@ -693,6 +715,26 @@ class ExperienceMap:
             from torchratslam.graph.backends._sweep import sweep
 
             src, dst, link = self._reference_links()
+            budget = self.params.exp_relax_budget
+            if budget and loops * len(src) > budget:
+                # a bounded number of updates, on round the links (exp_relax_budget)
+                from torchratslam.graph.backends._sweep import sweep_window
+
+                self._relax_cursor, moved = sweep_window(
+                    self._pose,
+                    src,
+                    dst,
+                    link,
+                    self._relax_cursor,
+                    budget,
+                    float(self.params.exp_correction),
+                )
+                self._poses_dirty = True
+                self._version += 1
+                if not moved and budget >= len(src):  # a whole pass changed nothing
+                    self._fixed_at = (self._version, id(self.params), id(backend))
+                return
+            self._relax_cursor = 0
             ran = sweep(self._pose, src, dst, link, loops, float(self.params.exp_correction))
             self._poses_dirty = True
             self._version += 1
@@ -713,6 +755,7 @@ class ExperienceMap:
                 self._link[:e],
                 passes=loops,
                 correction=self.params.exp_correction,
+                budget=self.params.exp_relax_budget,
             )
             self._poses_dirty = True
             self._version += 1
@@ -913,6 +956,7 @@ class ExperienceMap:
             "accum_facing": float(self.accum_facing),
             "accum_time": float(self.accum_time),
             "relative_rad": float(self.relative_rad),
+            "relax_cursor": int(self._relax_cursor),
         }
 
     def set_state(self, state: dict[str, Any]) -> None:
@@ -998,3 +1042,4 @@ class ExperienceMap:
         self.accum_facing = floats["accum_facing"]
         self.accum_time = floats["accum_time"]
         self.relative_rad = floats["relative_rad"]
+        self._relax_cursor = int(state.get("relax_cursor", 0))

@@ -131,7 +131,8 @@ class ExperienceMapParams(Params):
     exp_loops: int = param(10, "relaxation passes per step", ge=0)
     exp_initial_em_deg: float = param(90.0, "initial heading of the map (degrees)")
     exp_backend: str = param(
-        "alpha", "relaxation backend: alpha | alpha_local | alpha_reference | gtsam | isam2"
+        "alpha",
+        "relaxation backend: alpha | alpha_local | alpha_wave | alpha_reference | gtsam | isam2",
     )
     # Experience-map paper (Milford, Wyeth & Prasser 2006) features; defaults keep
     # OpenRatSLAM's behaviour (no averaging, no link deletion).
@@ -171,6 +172,15 @@ class ExperienceMapParams(Params):
         "a link's time: since_start (OpenRatSLAM never resets accum_delta_time_s) | "
         "per_link (time since the previous link)",
         choices=("since_start", "per_link"),
+    )
+    exp_relax_budget: int = param(
+        0,
+        "link updates per relaxation at most (alpha backend, openratslam order); 0: "
+        "exp_loops whole passes every time, as OpenRatSLAM. While exp_loops x links is "
+        "within the budget the passes are OpenRatSLAM's; beyond it each relaxation makes "
+        "this many updates, going on round the links where the previous one stopped, so "
+        "its cost stays flat as the map grows",
+        ge=0,
     )
     exp_relax_order: str = param(
         "openratslam",

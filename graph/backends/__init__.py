@@ -5,6 +5,8 @@
 
 - "alpha": the RatSLAM rule (Eq. 8), vectorised over colour classes of links (fast).
 - "alpha_reference": the same rule in OpenRatSLAM's order, a plain Python loop (slow).
+- "alpha_wave": "alpha_local" whose wave goes on at the next call where it stopped
+  (the front is carried over), waking links where a node moved by more than 1e-4.
 - "alpha_local": the same rule (colour order) only on the links the change since the
   previous call reaches, sweep after sweep until it dies down: a per-frame cost that
   follows the change, not the map's size (long runs).
@@ -82,6 +84,7 @@ BACKENDS: dict[str, Callable[..., Any]] = {
     "alpha": AlphaBackend,
     "alpha_reference": AlphaReferenceBackend,
     "alpha_local": AlphaLocalBackend,
+    "alpha_wave": lambda **options: AlphaLocalBackend(**{"tol": 1e-4, **options}, carry=True),
     "gtsam": _lazy_gtsam("GtsamBackend"),
     "isam2": _lazy_gtsam("ISAM2Backend"),
 }
@@ -91,7 +94,8 @@ def make_backend(name: str, **options: Any) -> Backend:
     """Create a backend by name.
 
     Args:
-        name: "alpha", "alpha_reference", "alpha_local", "gtsam" or "isam2".
+        name: "alpha", "alpha_reference", "alpha_local", "alpha_wave", "gtsam" or
+            "isam2".
         **options: constructor options of that backend (e.g. ``sigmas=(0.1, 0.1, 0.05)``
             for gtsam/isam2, ``schedule="openratslam"`` (the compiled reference-order
             sweep) or ``"reference"`` for alpha).

@@ -61,7 +61,8 @@ def local_sweeps(
     passes: int,
     c: float,
     wake: float,
-) -> tuple[int, int, bool]:  # pragma: no cover - compiled
+    max_links: int = 0,
+) -> tuple[int, int, bool, np.ndarray]:  # pragma: no cover - compiled
     """Sweeps of the alpha rule over the links of the dirty nodes, poses in place.
 
     A sweep gathers the links touching a dirty node, applies the rule to them in
@@ -77,12 +78,17 @@ def local_sweeps(
         stamps (no value >= ``stamp``), moved (>= N,) zeros, touched (>= 2E + 1,),
         active (>= E,).
 
+    ``max_links`` > 0: no new sweep starts once this many link updates were made.
+
     Returns:
-        (sweeps run, link updates made, True if it stopped because nothing was dirty).
+        (sweeps run, link updates made, True if it stopped because nothing was dirty,
+        the nodes still dirty when it stopped: the wave's front).
     """
     dirty = dirty_nodes[:n_dirty].copy()
     links = 0
     for sweep in range(passes):
+        if max_links > 0 and links >= max_links:
+            return sweep, links, False, dirty
         m = 0
         for i in range(dirty.shape[0]):
             slot = head[dirty[i]]
@@ -94,7 +100,7 @@ def local_sweeps(
                     m += 1
                 slot = nxt[slot]
         if m == 0:
-            return sweep, links, True
+            return sweep, links, True, dirty
         order = np.sort(active[:m])
         links += m
         nt = 0
@@ -131,4 +137,4 @@ def local_sweeps(
                 touched[nd] = node
                 nd += 1
         dirty = touched[:nd].copy()
-    return passes, links, dirty.shape[0] == 0
+    return passes, links, dirty.shape[0] == 0, dirty

@@ -104,3 +104,60 @@ def sweep(
         if not changed:
             break
     return ran
+
+
+@njit(cache=True, nogil=True)
+def sweep_window(
+    pose: np.ndarray,
+    src: np.ndarray,
+    dst: np.ndarray,
+    link: np.ndarray,
+    start: int,
+    count: int,
+    c: float,
+) -> tuple[int, bool]:  # pragma: no cover - compiled
+    """``count`` link updates of :func:`sweep`'s arithmetic, from link ``start`` on,
+    round the links in the given order (after the last, the first again).
+
+    Returns:
+        (the link to start from next time, True if any value changed).
+
+    Shape:
+        pose: (N, 3); src, dst: (E,); link: (E, 3) ``[d, heading, facing]``.
+    """
+    e = src.shape[0]
+    k = start % e
+    changed = False
+    for _ in range(count):
+        f = src[k]
+        t = dst[k]
+        xf = pose[f, 0]
+        yf = pose[f, 1]
+        thf = pose[f, 2]
+        xt = pose[t, 0]
+        yt = pose[t, 1]
+        tht = pose[t, 2]
+        d = link[k, 0]
+        lx = xf + d * math.cos(thf + link[k, 1])
+        ly = yf + d * math.sin(thf + link[k, 1])
+        ex = (xt - lx) * c
+        ey = (yt - ly) * c
+        nxf = xf + ex
+        nyf = yf + ey
+        nxt = xt - ex
+        nyt = yt - ey
+        df = get_signed_delta_rad(thf + link[k, 2], tht)
+        nthf = clip_rad_180(thf + df * c)
+        ntht = clip_rad_180(tht - df * c)
+        if nxf != xf or nyf != yf or nxt != xt or nyt != yt or nthf != thf or ntht != tht:
+            changed = True
+        pose[f, 0] = nxf
+        pose[f, 1] = nyf
+        pose[t, 0] = nxt
+        pose[t, 1] = nyt
+        pose[f, 2] = nthf
+        pose[t, 2] = ntht
+        k += 1
+        if k == e:
+            k = 0
+    return k, changed

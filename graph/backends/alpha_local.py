@@ -18,6 +18,11 @@ the odometry costs one sweep of its two links; a loop closure relaxes the loop i
 closes, for as many frames as the wave needs. Nodes the wave never reaches stay where
 they are, where ``alpha`` would nudge them by less than ``tol`` per sweep: the two maps
 differ by that residual (measured effect in docs/experience-map.md).
+
+``carry=True`` (registered as ``alpha_wave``): the nodes still dirty when a call stops
+(after ``passes`` sweeps, or ``budget`` link updates) start the next call's wave, so a
+correction keeps spreading over the following frames until it dies down below ``tol``
+instead of being dropped.
 """
 
 from __future__ import annotations
@@ -49,16 +54,20 @@ class AlphaLocalBackend:
         tol: a node that a sweep moves by more than this (|dx| + |dy| + |dth|, m and
             rad) wakes its links for the next sweep; the caller's ``tol`` is used when
             larger.
+        carry: carry the wave's front over to the next call (see the module doc).
     """
 
     name = "alpha_local"
     incremental = True
     accepts_tol = True
 
-    def __init__(self, tol: float = 1e-6) -> None:
+    def __init__(self, tol: float = 1e-6, *, carry: bool = False) -> None:
         if not (isinstance(tol, (int, float)) and tol > 0 and math.isfinite(tol)):
             raise ConfigError(f"alpha_local tol must be a positive number, got {tol!r}")
         self.tol = float(tol)
+        self.carry = bool(carry)
+        if self.carry:
+            self.name = "alpha_wave"
         self._clear()
 
     def _clear(self) -> None:
@@ -74,6 +83,7 @@ class AlphaLocalBackend:
         self._stamp = 0
         self._last: np.ndarray | None = None
         self._edge_prefix = np.zeros((0, 2), np.int64)
+        self._front = np.zeros(0, np.int64)  # carry: the wave's front, for the next call
 
     last_passes = 0
     """Sweeps the last call ran."""
@@ -97,6 +107,7 @@ class AlphaLocalBackend:
         correction: float = 0.5,
         tol: float = 0.0,
         changed: np.ndarray | None = None,
+        budget: int = 0,
     ) -> np.ndarray:
         """Relax the experience map's own arrays in place (no copy of the map).
 
@@ -113,6 +124,8 @@ class AlphaLocalBackend:
             correction: ``exp_correction``.
             tol: the caller's tolerance (the larger of it and the backend's is used).
             changed: nodes moved since the previous call, if any.
+            budget: with ``carry``, no new sweep once this many link updates were made
+                (0: none); the front goes on at the next call.
 
         Shape:
             pose: (N, 3) float64, C-contiguous; src, dst: (E,) int64; link: (E, >= 3).
@@ -144,12 +157,14 @@ class AlphaLocalBackend:
             parts.append(np.asarray(changed, np.int64))
         if old_e == 0:
             parts.append(np.arange(n))
+        if self.carry and len(self._front):
+            parts.append(self._front[self._front < n])
         dirty = np.concatenate(parts).astype(np.int64)
         self._nodes, self._links = n, e
         self.last_passes, self.last_links, self.last_converged = 0, 0, True
         if passes == 0 or e == 0:
             return pose
-        ran, links, converged = local_sweeps(
+        ran, links, converged, front = local_sweeps(
             pose,
             src,
             dst,
@@ -167,9 +182,12 @@ class AlphaLocalBackend:
             int(passes),
             float(correction),
             max(float(tol), self.tol),
+            int(budget) if self.carry else 0,
         )
+        self._front = front.copy() if self.carry else self._front[:0]
         self._stamp += int(passes) + 1
-        self.last_passes, self.last_links, self.last_converged = int(ran), int(links), converged
+        self.last_passes, self.last_links = int(ran), int(links)
+        self.last_converged = bool(converged) and not len(self._front)
         return pose
 
     def relax(

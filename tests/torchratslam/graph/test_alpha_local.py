@@ -111,6 +111,50 @@ def test_a_loop_closure_relaxes_its_loop_like_alpha_and_leaves_far_nodes_alone()
     assert np.any(out[150:] != poses[150:], axis=1).sum() >= 30
 
 
+def test_alpha_wave_carries_its_front_to_the_next_call():
+    """With ``carry`` (``alpha_wave``) the wave cut short by ``passes`` or ``budget`` goes
+    on at the next call, until it dies down; without it the rest of the correction is
+    dropped (nothing new happens, so nothing wakes the links again)."""
+    rng = np.random.default_rng(4)
+    n = 120
+    truth, edges, meas = _chain(rng, n, noise=0.0)
+    close = np.array([[10, n - 1]])
+    cm = between(truth[10:11], truth[n - 1 :])
+    noisy = truth + rng.normal(0, 0.2, truth.shape)
+    pg = PoseGraph(noisy, np.r_[edges, close], np.r_[meas, cm])
+    wave = make_backend("alpha_wave", tol=1e-9)
+    assert wave.carry and wave.name == "alpha_wave"
+    dropped = AlphaLocalBackend(tol=1e-9)
+    outs = {}
+    for name, backend in (("wave", wave), ("dropped", dropped)):
+        out = pg.poses
+        for _ in range(300):  # 2 sweeps a call
+            out = backend.relax(PoseGraph(out, pg.edges, pg.measurements), passes=2)
+        outs[name] = out
+    # 300 calls of 2 sweeps with the front carried = one call of 600 sweeps
+    whole = AlphaLocalBackend(tol=1e-9).relax(pg, passes=600)
+    np.testing.assert_allclose(outs["wave"], whole, rtol=0, atol=1e-9)
+    # without it, everything after the first call's 2 sweeps is dropped
+    first = AlphaLocalBackend(tol=1e-9).relax(pg, passes=2)
+    np.testing.assert_array_equal(outs["dropped"], first)
+    assert np.abs(outs["dropped"] - whole).max() > 1e-2
+    # a budget stops the call early: the rest is carried too
+    budgeted = make_backend("alpha_wave", tol=1e-9)
+    p = np.ascontiguousarray(pg.poses.copy())
+    link = np.stack([np.hypot(pg.measurements[:, 0], pg.measurements[:, 1]),
+                     np.arctan2(pg.measurements[:, 1], pg.measurements[:, 0]),
+                     pg.measurements[:, 2]], 1)  # fmt: skip
+    src, dst = np.ascontiguousarray(pg.edges[:, 0]), np.ascontiguousarray(pg.edges[:, 1])
+    budgeted.relax_inplace(p, src, dst, link, passes=50, budget=30)
+    assert budgeted.last_links < 30 + 2 * len(src) and not budgeted.last_converged
+    assert budgeted.last_passes < 50 and len(budgeted._front)
+    start = np.abs(pg.relative_errors(p)).max()
+    for _ in range(300):
+        budgeted.relax_inplace(p, src, dst, link, passes=50, budget=30)
+        assert budgeted.last_links < 30 + 2 * len(src)
+    assert np.abs(pg.relative_errors(p)).max() < start / 10
+
+
 def test_options_and_registry():
     assert isinstance(make_backend("alpha_local"), AlphaLocalBackend)
     with pytest.raises(ConfigError, match="tol"):

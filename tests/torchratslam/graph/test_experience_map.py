@@ -625,3 +625,74 @@ def test_first_experience_and_link_times_as_openratslam():
         own.on_odometry(1.0, 0.0, 1.0)
         own.apply(Action(ActionKind.CREATE, dest_id=k))
     assert own.links()["dt"].tolist() == [3.0, 1.0]  # the first link also counts frame 0's 2 s
+
+
+def brute_force_window(poses: np.ndarray, src, dst, link, start: int, count: int, c: float):
+    """``count`` updates of OpenRatSLAM's rule round the links in its order, from the
+    ``start``-th link of that order on; returns (poses, where the next call starts)."""
+    p = poses.tolist()
+    order = sorted(range(len(src)), key=lambda k: (src[k], k))
+    i = start % len(order)
+    for _ in range(count):
+        k = order[i]
+        f, t = p[src[k]], p[dst[k]]
+        d, heading, facing = link[k]
+        lx = f[0] + d * math.cos(f[2] + heading)
+        ly = f[1] + d * math.sin(f[2] + heading)
+        f[0] += (t[0] - lx) * c
+        f[1] += (t[1] - ly) * c
+        t[0] -= (t[0] - lx) * c
+        t[1] -= (t[1] - ly) * c
+        da = signed_delta(f[2] + facing, t[2])
+        f[2] = clip_rad_180(f[2] + da * c)
+        t[2] = clip_rad_180(t[2] - da * c)
+        i = (i + 1) % len(order)
+    return np.array(p), i
+
+
+def test_relax_budget_is_openratslams_sweep_until_it_binds():
+    """``exp_relax_budget`` at least ``exp_loops`` x links: OpenRatSLAM's passes, bit for
+    bit; below: exactly ``budget`` updates of its rule per call, round the links in its
+    order from where the previous call stopped (the brute-force loop), and a saved map
+    goes on from the same link."""
+    free = ExperienceMap(ExperienceMapParams(exp_loops=6))
+    roomy = ExperienceMap(ExperienceMapParams(exp_loops=6, exp_relax_budget=10**9))
+    random_session(5, 150, free)
+    random_session(5, 150, roomy)
+    assert np.array_equal(free.poses, roomy.poses)
+    # a map built without relaxation, then relaxed under a small budget
+    built = ExperienceMap(ExperienceMapParams(exp_loops=0))
+    random_session(6, 150, built)
+    state = built.get_state()
+    e = built.num_links
+    assert e > len(built) > 30
+    budget = 37
+    tight = ExperienceMap(ExperienceMapParams(exp_loops=6, exp_relax_budget=budget))
+    tight.set_state(state)
+    links = tight.links()
+    src, dst = links["src"].tolist(), links["dst"].tolist()
+    link = np.stack([links["d"], links["heading"], links["facing"]], 1).tolist()
+    want, at = np.asarray(state["poses"]), 0
+    for call in range(5):
+        tight.iterate()
+        want, at = brute_force_window(want, src, dst, link, at, budget, 0.5)
+        assert np.array_equal(tight.poses, want)
+        if call == 1:
+            saved = tight.get_state()
+    assert at == (5 * budget) % e
+    again = ExperienceMap(ExperienceMapParams(exp_loops=6, exp_relax_budget=budget))
+    again.set_state(saved)
+    for _ in range(3):
+        again.iterate()
+    assert np.array_equal(again.poses, tight.poses)
+
+
+def test_reference_order_kept_by_insertion_equals_a_fresh_sort():
+    em = ExperienceMap(ExperienceMapParams(exp_loops=3))
+    random_session(9, 200, em)  # loop closures insert links in the middle of the order
+    src, dst, link = em._reference_links()
+    e = em.num_links
+    order = np.argsort(em._src[:e], kind="stable")
+    assert np.array_equal(src, em._src[:e][order])
+    assert np.array_equal(dst, em._dst[:e][order])
+    assert np.array_equal(link, em._link[:e, :3][order])

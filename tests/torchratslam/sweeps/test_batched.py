@@ -34,7 +34,8 @@ def test_batched_group_equals_separate_runs(cells, one_network):
         {
             "base": "virtual_tour",
             "set": {
-                "behaviour": "torchratslam_v0",  # batching: the torch pose-cell step (pc_engine: torch)
+                # batching needs the torch pose-cell step (pc_engine: torch)
+                "behaviour": "torchratslam_v0",
                 "pc_dim_xy": xy,
                 "pc_dim_th": th,
                 "exp_loops": 20,

@@ -19,7 +19,11 @@ ROOT = Path(__file__).resolve().parents[3]
 # 2 x 3 values x 2 seeds = 12 tiny runs (25 frames of one lap of the loop tour)
 SWEEP = {
     "base": "virtual_tour",
-    "set": {"pc_dim_xy": 21, "exp_loops": 5, "behaviour": "torchratslam_v0"},  # batchable (pc_engine: torch)
+    "set": {
+        "pc_dim_xy": 21,
+        "exp_loops": 5,
+        "behaviour": "torchratslam_v0",
+    },  # batchable (pc_engine: torch)
     "parameters": {
         "vt_match_threshold": [0.05, 0.08],
         "pc_vt_inject_energy": {"start": 0.05, "stop": 0.25, "num": 3},
