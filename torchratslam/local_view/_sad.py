@@ -118,7 +118,8 @@ def search_normal(  # pragma: no cover - compiled
     """Normal mode: every (template, offset) pair through three stages of elimination.
 
     Per pair, the L1 distance between the sums of pairs of compared columns (the view's
-    ``vpairs`` against the template's ``pairs[t, k]``, contiguous per template), then
+    ``vpairs`` against the template's, read from ``pairs``: 47 numbers per template of 48
+    columns serve every offset), then
     between the compared columns' sums (``vcols`` against ``cols[t, o:o + width]``):
     lower bounds of the pair's SAD by the triangle inequality, each tighter than the
     last; then, if both are within the cut, the float64 SAD itself, row by row with
@@ -130,13 +131,14 @@ def search_normal(  # pragma: no cover - compiled
     Args:
         data: the bank's rows, ``(capacity, Y, X)``.
         cols: each template's column sums, ``(capacity, X)``.
-        pairs: each template's compared window at each offset, its column sums summed
-            in blocks of two columns, ``(capacity, K * B)``.
+        pairs: each template's sums of adjacent column pairs, from even columns then
+            from odd columns (``(capacity, 2 * (X // 2))``): block ``j`` of offset
+            ``o``'s window is entry ``(o % 2) * (X // 2) + o // 2 + j``.
         n: templates in the bank.
         view: the view template, ``(Y, X)``.
         vcols: the column sums of the view's compared columns ``shift .. shift +
             width - 1``, ``(width,)``.
-        vpairs: ``vcols`` summed in the same blocks, ``(B,)``.
+        vpairs: ``vcols`` summed in pairs ``[v0 + v1, v2 + v3, ...]``, ``(width // 2,)``.
         offsets: the column offset of each offset index, ``(K,)``.
         width: compared columns.
         shift: first compared view column.
@@ -153,6 +155,7 @@ def search_normal(  # pragma: no cover - compiled
     """
     kk = offsets.shape[0]
     nb = vpairs.shape[0]
+    half = pairs.shape[1] // 2
     ny = view.shape[0]
     out_t = np.empty(n * kk, np.int64)
     out_k = np.empty(n * kk, np.int64)
@@ -172,8 +175,8 @@ def search_normal(  # pragma: no cover - compiled
         for ki in range(kk):
             cut = min(best, cap) + margin
             o = offsets[ki]
-            b = pairs[t, 0] * 0
-            base = ki * nb
+            b = vcols[0] * 0
+            base = (o % 2) * half + o // 2
             for j in range(nb):
                 b += abs(pairs[t, base + j] - vpairs[j])
             if b > cut:

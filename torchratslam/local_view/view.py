@@ -445,16 +445,11 @@ class TemplateMatcher:
             shifted = torch.zeros(self.n_offsets, x_size, nb, dtype=torch.float64)
             for k, o in enumerate(offs.tolist()):
                 shifted[k, o : o + self.width] = blocks
-        # blocks of two columns of the compared width, placed at every offset (normal)
-        self.pair_blocks = nb2 = max(1, self.width // 2)
-        shifted2 = torch.zeros(x_size, self.n_offsets, nb2, dtype=torch.float64)
-        if not self.panoramic:
-            for j, c in enumerate(torch.tensor_split(torch.arange(self.width), nb2)):
-                for k, o in enumerate(offs.tolist()):
-                    shifted2[c + o, k, j] = 1
+        # the compiled search's pair bound: sums of adjacent column pairs starting at even
+        # and at odd columns; block j of offset o's window is pair o // 2 + j of phase o % 2
+        self.pair_blocks = self.width // 2
+        self.half = x_size // 2
         self._mats = {
-            "shifted2": shifted2.reshape(x_size, -1).to(device),
-            "blocks2": shifted2[:, 0, :][int(offs[0]) : int(offs[0]) + self.width].to(device),
             "groups": groups.to(device),
             "blocks": blocks.to(device),
             "shifted": shifted.permute(1, 0, 2).reshape(x_size, -1).to(device),
@@ -470,7 +465,7 @@ class TemplateMatcher:
             shapes = {
                 "pool": (self.n_offsets * g * nb,),
                 "cols": (x,),
-                "pairs": (self.n_offsets * self.pair_blocks,),
+                "pairs": (2 * self.half,),
             }
         return TemplateBank(
             self.y_size,
@@ -500,13 +495,23 @@ class TemplateMatcher:
             }
         pool = (gsum @ self._mat("shifted", t.dtype)).view(m, g, self.n_offsets, nb)
         # (M, K, G, B); and for the compiled search's bounds, the column sums (M, X) and
-        # the compared window's column sums in blocks of two at every offset (M, K * B2)
+        # the sums of adjacent column pairs from even and from odd columns (M, 2 * (X // 2))
         cols = t.sum(1)
         return {
             "pool": pool.permute(0, 2, 1, 3).reshape(m, -1),
             "cols": cols,
-            "pairs": cols @ self._mat("shifted2", t.dtype),
+            "pairs": self._pair_sums(cols),
         }
+
+    def _pair_sums(self, cols: torch.Tensor) -> torch.Tensor:
+        """``[c0 + c1, c2 + c3, ...]`` then ``[c1 + c2, c3 + c4, ...]`` (zero-padded) of
+        column sums ``(M, X)``: ``(M, 2 * (X // 2))``."""
+        h, x = self.half, self.x_size
+        out = torch.zeros(cols.shape[0], 2 * h, dtype=cols.dtype, device=cols.device)
+        out[:, :h] = cols[:, 0 : 2 * h : 2] + cols[:, 1 : 2 * h : 2]
+        odd = (x - 1) // 2
+        out[:, h : h + odd] = cols[:, 1 : 2 * odd : 2] + cols[:, 2 : 2 * odd + 1 : 2]
+        return out
 
     def _mat(self, name: str, dtype: torch.dtype) -> torch.Tensor:
         key = (name, dtype)
@@ -714,7 +719,8 @@ class TemplateMatcher:
             from torchratslam.local_view._sad import search_normal
 
             vcols = parts["block"].sum(0)
-            vpairs = vcols @ self._mat("blocks2", vcols.dtype)
+            nb = self.pair_blocks
+            vpairs = vcols[0 : 2 * nb : 2] + vcols[1 : 2 * nb : 2]
             pt, pk, ps, m, best64, low = search_normal(
                 bank._data.numpy(),
                 bank._cols.numpy(),

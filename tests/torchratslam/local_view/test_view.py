@@ -521,3 +521,18 @@ def test_compiled_screening_gives_the_torch_search_bit_for_bit(panoramic, dtype)
                 best = float(lv.errors(vt).min())
                 assert thr is not None and thr < fast[2] <= best + 1e-6
     lv.matcher.compiled = True
+
+
+@pytest.mark.parametrize(("x", "shift", "step"), [(1, 0, 1), (2, 0, 1), (3, 1, 1), (9, 4, 3), (10, 2, 2)])
+def test_compiled_search_on_narrow_windows(x, shift, step):
+    """Windows of one or two columns (no column pair, or one) and odd offsets."""
+    rng = np.random.default_rng(x * 10 + shift)
+    y = 3
+    bank = smooth_bank(rng, 30, y, x) if x > 2 else rng.random((30, y, x))
+    lv = make_lv(y, x, panoramic=False, shift=shift, step=step)
+    lv.add_templates(bank)
+    for i in range(5):
+        v = np.clip(bank[i * 5] + 0.01 * rng.random((y, x)), 0, 1) if i else rng.random((y, x))
+        want = brute_force(bank, v, False, shift, step)
+        got = lv.match(v)
+        assert got[:2] == want[:2] and got[2] == pytest.approx(want[2], abs=1e-12)
