@@ -33,6 +33,8 @@ from torchratslam.protocols import FrameSource
 
 __all__ = [
     "PAPER_ICP_RMSE",
+    "RECOMMENDED_MERGE_OPTIONS",
+    "RECOMMENDED_SESSION_OPTIONS",
     "TOUR_CONFIG",
     "report_markdown",
     "run_experiment",
@@ -439,7 +441,8 @@ def run_tour(
             (``exp_pc_shift``, ``match_exp``; default: the authors' code).
         observer: watches the multisession mapping's sessions (see :func:`run_sessions`).
         session_options: :class:`MultiSessionRatSLAM` options for every multisession
-            run (``merge_threshold``, ``merge_persist``; default: the paper's).
+            run (``merge_threshold``, ``merge_persist``, ``merge_absorb``; default: the
+            paper's).
 
     Returns:
         ``report`` (JSON-able: the keys of ``OUT/report.json``) and ``data`` (the maps,
@@ -632,6 +635,7 @@ def run_experiment(
     rerun_save: str | Path | None = None,
     merge_threshold: float | None = None,
     merge_persist: int = 1,
+    merge_absorb: bool = False,
 ) -> dict[str, Any]:
     """Run the experiment on a tour and write OUT (what the CLI and the demo call):
     ``report.json``, ``report.md``, the figures and the session maps.
@@ -648,6 +652,7 @@ def run_experiment(
         rerun_save: record the multisession mapping for rerun into this ``.rrd`` file.
         merge_threshold: :class:`MultiSessionRatSLAM` ``merge_threshold`` (None: the paper's).
         merge_persist: :class:`MultiSessionRatSLAM` ``merge_persist`` (1: the paper's).
+        merge_absorb: :class:`MultiSessionRatSLAM` ``merge_absorb`` (False: the paper's).
 
     Returns:
         :func:`run_tour`'s result (``report`` and ``data``).
@@ -683,8 +688,12 @@ def run_experiment(
             observer=observer,
             session_options={
                 k: v
-                for k, v in (("merge_threshold", merge_threshold), ("merge_persist", merge_persist))
-                if v != {"merge_threshold": None, "merge_persist": 1}[k]
+                for k, v in (
+                    ("merge_threshold", merge_threshold),
+                    ("merge_persist", merge_persist),
+                    ("merge_absorb", merge_absorb),
+                )
+                if v != {"merge_threshold": None, "merge_persist": 1, "merge_absorb": False}[k]
             },
         )
     finally:
@@ -708,6 +717,13 @@ ABLATION_MARGIN = 0.10
 """Issue 18: without the pose-cell shift at least 10% more experiences."""
 WRONG_PLACE_M = 1.0
 """A merge whose two matched experiences lie further apart (ground truth) is wrong."""
+RECOMMENDED_MERGE_OPTIONS: dict[str, Any] = {"pc_shift_rotate": True}
+"""Issue 18: the ``merge_maps`` options recommended for merges that hold across seeds
+(docs/multisession.md, "Across seeds"); each is a named deviation from the paper."""
+RECOMMENDED_SESSION_OPTIONS: dict[str, Any] = {"merge_persist": 2, "merge_absorb": True}
+"""Issue 18: the :class:`MultiSessionRatSLAM` options recommended with
+:data:`RECOMMENDED_MERGE_OPTIONS` (a match confirmed by the next new template, the
+first matching template identified with its stored match)."""
 
 
 def _gt_at(gt: np.ndarray, t: float) -> np.ndarray:
@@ -750,7 +766,7 @@ def seed_row(
         max_frames: frames per session at most (quick checks).
         merge_options: ``merge_maps`` options.
         **session_kwargs: :class:`MultiSessionRatSLAM` options (``merge_threshold``,
-            ``merge_persist``).
+            ``merge_persist``, ``merge_absorb``).
 
     Returns:
         ``single``, ``multi``, ``ablation`` (experience counts), ``diff`` and
@@ -772,7 +788,13 @@ def seed_row(
         "maps": len(multi["maps"]),
         "diff": _relative(n_m, n_s),
         "merges": [
-            {"session": m["session"], "frame": m["frame"], "error": m["error"], "distance_m": d}
+            {
+                "session": m["session"],
+                "frame": m["frame"],
+                "error": m["error"],
+                "distance_m": d,
+                "experiences_added": m.get("experiences_added"),
+            }
             for m, d in zip(multi["merges"], dist)
         ],
         "wrong_merges": int(sum(1 for d in dist if not d <= WRONG_PLACE_M)),
