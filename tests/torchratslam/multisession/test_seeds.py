@@ -165,3 +165,40 @@ def test_two_seeds_hold_with_the_recommended_merge():
     assert table["within"] == 2 and table["ablation_above"] == 2 and table["wrong_merges"] == 0
     text = seed_table_markdown(table)
     assert "| 2 | 6 |" in text and "2/2 seeds" in text
+
+
+def test_place_counts_by_hand():
+    """Experiences 1 m apart along a line, back, and along it again: the way back (the
+    opposite heading) repeats nothing, the second pass the same way repeats two places;
+    the one place only a bridge frame sees is unseen by the sessions."""
+    from torchratslam.experiments.multisession_tour import place_counts
+    from torchratslam.maps.state import MapState
+
+    # ground truth: t = 0..5 along +x at x = 0..5, t = 6..8 back along -x at x = 4, 3, 2,
+    # t = 9..10 along +x again at x = 1, 2
+    xs = [0, 1, 2, 3, 4, 5, 4, 3, 2, 1, 2]
+    th = [0.0] * 6 + [np.pi] * 3 + [0.0] * 2
+    gt = np.c_[np.arange(11.0), xs, np.zeros(11), th]
+    state = MapState.empty({"pc_dim_xy": 9, "pc_dim_th": 12})
+    t = np.array([0.0, 1, 2, 3, 4, 5, 7, 9, 10])  # 9 experiences
+    state = dataclasses_replace(state, t)
+    sessions = np.array([0, 1, 2, 3, 4, 6, 7, 8, 9, 10])  # frame 5 (x = 5) is a bridge
+    out = place_counts(state, gt, sessions)
+    assert out["radius_m"] == pytest.approx(0.5)
+    # t = 9 (x = 1, +x) repeats t = 1, t = 10 (x = 2, +x) repeats t = 2; t = 7 is the way back
+    assert out["repeats"] == 2 and out["places"] == 7
+    assert out["unseen"] == 1 and out["places_seen"] == 6
+
+
+def dataclasses_replace(state, t):
+    import dataclasses
+
+    m = len(t)
+    return dataclasses.replace(
+        state,
+        exp_pose=np.zeros((m, 3)),
+        exp_pc=np.zeros((m, 3)),
+        exp_template=np.zeros(m, np.int64),
+        exp_frame=np.arange(m, dtype=np.int64),
+        exp_t=np.asarray(t, np.float64),
+    )
