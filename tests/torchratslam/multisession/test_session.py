@@ -20,9 +20,8 @@ torch.set_num_threads(1)
 
 # the shipped virtual-tour config, unmodified (the paper's Table 1: vt_step_match 2)
 CONFIG = load_config("virtual_tour")
-# the same with the project's own behaviour (the "torchratslam_v0" profile, the project
-# before issue 12): the experience counts below were calibrated with it; OpenRatSLAM's
-# default behaviour gives
+# the same with the project's behaviour before issue 12 (the "torchratslam_v0" profile): the
+# experience counts below were calibrated with it; OpenRatSLAM's default behaviour gives
 # 39 experiences against the continuous run's 37 and 42 without the shift against 39
 OWN = load_config("virtual_tour", behaviour="torchratslam_v0")
 
