@@ -33,7 +33,10 @@ from torchratslam.protocols import FrameSource
 
 __all__ = [
     "PAPER_ICP_RMSE",
+    "RECOMMENDED_MERGE_OPTIONS",
+    "RECOMMENDED_SESSION_OPTIONS",
     "TOUR_CONFIG",
+    "place_counts",
     "report_markdown",
     "run_experiment",
     "run_sessions",
@@ -439,7 +442,8 @@ def run_tour(
             (``exp_pc_shift``, ``match_exp``; default: the authors' code).
         observer: watches the multisession mapping's sessions (see :func:`run_sessions`).
         session_options: :class:`MultiSessionRatSLAM` options for every multisession
-            run (``merge_threshold``, ``merge_persist``; default: the paper's).
+            run (``merge_threshold``, ``merge_persist``, ``merge_absorb``; default: the
+            paper's).
 
     Returns:
         ``report`` (JSON-able: the keys of ``OUT/report.json``) and ``data`` (the maps,
@@ -632,6 +636,7 @@ def run_experiment(
     rerun_save: str | Path | None = None,
     merge_threshold: float | None = None,
     merge_persist: int = 1,
+    merge_absorb: bool = False,
 ) -> dict[str, Any]:
     """Run the experiment on a tour and write OUT (what the CLI and the demo call):
     ``report.json``, ``report.md``, the figures and the session maps.
@@ -648,6 +653,7 @@ def run_experiment(
         rerun_save: record the multisession mapping for rerun into this ``.rrd`` file.
         merge_threshold: :class:`MultiSessionRatSLAM` ``merge_threshold`` (None: the paper's).
         merge_persist: :class:`MultiSessionRatSLAM` ``merge_persist`` (1: the paper's).
+        merge_absorb: :class:`MultiSessionRatSLAM` ``merge_absorb`` (False: the paper's).
 
     Returns:
         :func:`run_tour`'s result (``report`` and ``data``).
@@ -683,8 +689,12 @@ def run_experiment(
             observer=observer,
             session_options={
                 k: v
-                for k, v in (("merge_threshold", merge_threshold), ("merge_persist", merge_persist))
-                if v != {"merge_threshold": None, "merge_persist": 1}[k]
+                for k, v in (
+                    ("merge_threshold", merge_threshold),
+                    ("merge_persist", merge_persist),
+                    ("merge_absorb", merge_absorb),
+                )
+                if v != {"merge_threshold": None, "merge_persist": 1, "merge_absorb": False}[k]
             },
         )
     finally:
@@ -708,6 +718,13 @@ ABLATION_MARGIN = 0.10
 """Issue 18: without the pose-cell shift at least 10% more experiences."""
 WRONG_PLACE_M = 1.0
 """A merge whose two matched experiences lie further apart (ground truth) is wrong."""
+RECOMMENDED_MERGE_OPTIONS: dict[str, Any] = {"pc_shift_rotate": True}
+"""Issue 18: the ``merge_maps`` options recommended for merges that hold across seeds
+(docs/multisession.md, "Across seeds"); each is a named deviation from the paper."""
+RECOMMENDED_SESSION_OPTIONS: dict[str, Any] = {"merge_persist": 2, "merge_absorb": True}
+"""Issue 18: the :class:`MultiSessionRatSLAM` options recommended with
+:data:`RECOMMENDED_MERGE_OPTIONS` (a match confirmed by the next new template, the
+first matching template identified with its stored match)."""
 
 
 def _gt_at(gt: np.ndarray, t: float) -> np.ndarray:
@@ -731,6 +748,59 @@ def merge_distances(merges: list[dict[str, Any]], gt: np.ndarray) -> list[float]
     return out
 
 
+PLACE_HEADING_DEG = 20.0
+""":func:`place_counts`: two experiences are at one place when their headings (ground
+truth) differ by at most this much (and their positions by half the median spacing)."""
+
+
+def place_counts(
+    state: MapState, gt: np.ndarray, session_frames: np.ndarray | None = None
+) -> dict[str, Any]:
+    """How many of a map's experiences are distinct places, in ground truth (a diagnostic
+    of the per-seed table: which experiences are repeats, which lie where no session
+    looks).
+
+    An experience *repeats* an earlier one (creation time) when their ground-truth
+    positions are within half the median distance between experiences consecutive in
+    creation, and their headings within :data:`PLACE_HEADING_DEG`; ``places`` counts
+    the rest. With ``session_frames`` (rows of ``gt`` the sessions drive), an
+    experience is *unseen* when no session frame has its position and heading within
+    the same bounds (a view only the continuous run's drives between sessions see).
+
+    Shape:
+        gt: ``(T, 4)`` rows ``[t, x, y, th]`` on the map's clock; session_frames: ``(F,)``.
+
+    Returns:
+        ``experiences``, ``repeats``, ``places``, ``radius_m``, and with
+        ``session_frames``: ``unseen``, ``places_seen`` (places the sessions see).
+    """
+    n = state.n_experiences
+    out: dict[str, Any] = {"experiences": n, "repeats": 0, "places": n, "radius_m": 0.0}
+    if n == 0:
+        return out
+    idx = np.argmin(np.abs(gt[:, 0][None, :] - state.exp_t[:, None]), axis=1)
+    p, h = gt[idx, 1:3], gt[idx, 3]
+    order = np.argsort(state.exp_t, kind="stable")
+    steps = np.linalg.norm(np.diff(p[order], axis=0), axis=1)
+    r = 0.5 * float(np.median(steps)) if steps.size else 0.0
+    hmax = np.radians(PLACE_HEADING_DEG)
+
+    def near(q: np.ndarray, hq: np.ndarray) -> np.ndarray:
+        d = np.linalg.norm(p[:, None, :] - q[None, :, :], axis=2)
+        dh = np.abs((h[:, None] - hq[None, :] + np.pi) % (2 * np.pi) - np.pi)
+        return (d <= r) & (dh <= hmax)
+
+    rank = np.empty(n, np.int64)
+    rank[order] = np.arange(n)
+    repeat = (near(p, h) & (rank[None, :] < rank[:, None])).any(axis=1)
+    out.update(repeats=int(repeat.sum()), places=int((~repeat).sum()), radius_m=r)
+    if session_frames is not None:
+        f = np.asarray(session_frames, np.int64)
+        seen = near(gt[f, 1:3], gt[f, 3]).any(axis=1)
+        out.update(unseen=int((~seen).sum()), places_seen=int((~repeat & seen).sum()))
+    return out
+
+
 def seed_row(
     config: RatSLAMConfig,
     tour: Any,
@@ -750,12 +820,14 @@ def seed_row(
         max_frames: frames per session at most (quick checks).
         merge_options: ``merge_maps`` options.
         **session_kwargs: :class:`MultiSessionRatSLAM` options (``merge_threshold``,
-            ``merge_persist``).
+            ``merge_persist``, ``merge_absorb``).
 
     Returns:
         ``single``, ``multi``, ``ablation`` (experience counts), ``diff`` and
-        ``ablation_diff`` (relative to single), ``merges`` (session, frame, ground-truth
-        distance of the matched experiences in m), ``wrong_merges``.
+        ``ablation_diff`` (relative to single), ``single_places`` and ``multi_places``
+        (:func:`place_counts`: repeats, distinct places, places the sessions see),
+        ``merges`` (session, frame, ground-truth distance of the matched experiences in
+        m, experiences added), ``wrong_merges``.
     """
     clock = _clock(tour)
     limit = None if max_frames is None else max_frames * len(tour.sessions)
@@ -766,13 +838,24 @@ def seed_row(
     multi = run_sessions(config, tour.sessions, offsets=clock.offsets, **kw)
     n_s, n_m = single.n_experiences, multi["maps"][-1].n_experiences
     dist = merge_distances(multi["merges"], clock.gt)
+    frames = np.concatenate(
+        [np.arange(a, min(a + len(t), len(clock.gt))) for a, t in zip(clock.starts, tour.sessions)]
+    )
     row: dict[str, Any] = {
         "single": int(n_s),
         "multi": int(n_m),
+        "single_places": place_counts(single, clock.gt, frames),
+        "multi_places": place_counts(multi["maps"][-1], clock.gt, frames),
         "maps": len(multi["maps"]),
         "diff": _relative(n_m, n_s),
         "merges": [
-            {"session": m["session"], "frame": m["frame"], "error": m["error"], "distance_m": d}
+            {
+                "session": m["session"],
+                "frame": m["frame"],
+                "error": m["error"],
+                "distance_m": d,
+                "experiences_added": m.get("experiences_added"),
+            }
             for m, d in zip(multi["merges"], dist)
         ],
         "wrong_merges": int(sum(1 for d in dist if not d <= WRONG_PLACE_M)),
@@ -878,6 +961,23 @@ def seed_table_markdown(table: dict[str, Any]) -> str:
             "| ablation (no pose-cell shift) | "
             + " | ".join(
                 f"{rows[s]['ablation']} ({_fmt(rows[s]['ablation_diff'], '+.0%')})" for s in seeds
+            )
+            + " |"
+        )
+    if all("single_places" in rows[s] for s in seeds):
+        lines.append(
+            "| places multi / single (seen by the sessions) | "
+            + " | ".join(
+                f"{rows[s]['multi_places']['places_seen']}/{rows[s]['single_places']['places_seen']}"
+                for s in seeds
+            )
+            + " |"
+        )
+        lines.append(
+            "| single: repeats, unseen | "
+            + " | ".join(
+                f"{rows[s]['single_places']['repeats']}, {rows[s]['single_places']['unseen']}"
+                for s in seeds
             )
             + " |"
         )

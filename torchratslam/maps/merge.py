@@ -59,6 +59,7 @@ __all__ = [
     "MATCH_EXPS",
     "MergeResult",
     "first_experience",
+    "fuse_templates",
     "merge_maps",
     "pc_distance",
     "pick_experience",
@@ -183,11 +184,16 @@ def rigid_transform(poses: np.ndarray, dth: float, tx: float, ty: float) -> np.n
 
 
 def _rotate_shift(
-    pcs: np.ndarray, src: np.ndarray, dst: np.ndarray, dims: np.ndarray
+    pcs: np.ndarray, src: np.ndarray, dst: np.ndarray, dims: np.ndarray, axis: str = "math"
 ) -> np.ndarray:
     """Move pose-cell coordinates so that ``src`` lands on ``dst``, rotating the (x, y)
     offsets from ``src`` (the shorter way round the torus) by the heading shift
     ``(dst_th - src_th) * 2 pi / n_th``; th is shifted as in Eq. 10.
+
+    ``axis`` is the network's ``pc_axis``: with ``"math"`` layer ``k`` moves along
+    ``(cos, sin)(k 2 pi / TH)``, so a heading shift of ``a`` turns the offsets by ``a``;
+    with ``"openratslam"`` it moves along ``(sin, cos)`` (x and y swapped, a mirror), so
+    the same heading shift turns them by ``-a``.
 
     Shape:
         pcs: ``(N, 3)``; src, dst, dims: ``(3,)``; returns ``(N, 3)``.
@@ -197,6 +203,8 @@ def _rotate_shift(
     half = dims[:2] / 2.0
     rel[:, :2] = np.mod(rel[:, :2] + half, dims[:2]) - half
     a = float(dst[2] - src[2]) * 2.0 * math.pi / float(dims[2])
+    if axis == "openratslam":
+        a = -a
     c, s = math.cos(a), math.sin(a)
     x, y = rel[:, 0].copy(), rel[:, 1].copy()
     rel[:, 0], rel[:, 1] = c * x - s * y, s * x + c * y
@@ -284,6 +292,7 @@ def merge_maps(
     if not -1 <= e_z < n_ep:
         raise GraphError(f"partial experience {e_z} does not exist (the partial map has {n_ep})")
     dims = np.asarray(partial.pc_dims, np.float64)
+    axis = str(partial.config.get("pc_axis", "openratslam"))  # OpenRatSLAM's when unsaid
 
     # (i) templates, Eq. 9
     keep_t = np.ones(n_vp, bool)
@@ -294,7 +303,7 @@ def merge_maps(
     assoc_shift = delta if shift_pose_cells else np.zeros(3)
     if shift_pose_cells and pc_shift_rotate:
         t_pc = _rotate_shift(
-            partial.template_pc[keep_t], partial.template_pc[z], loaded.template_pc[u], dims
+            partial.template_pc[keep_t], partial.template_pc[z], loaded.template_pc[u], dims, axis
         )
     else:
         t_pc = np.mod(partial.template_pc[keep_t] + assoc_shift, dims)
@@ -325,7 +334,7 @@ def merge_maps(
     if shift_pose_cells and pc_shift_rotate:
         by_exp = exp_pc_shift == "experiences" and e_z >= 0
         src = partial.exp_pc[e_z] if by_exp else partial.template_pc[z]
-        new_pc = _rotate_shift(partial.exp_pc[keep_e], src, src + exp_shift, dims)
+        new_pc = _rotate_shift(partial.exp_pc[keep_e], src, src + exp_shift, dims, axis)
     else:
         new_pc = np.mod(partial.exp_pc[keep_e] + exp_shift, dims)
     new_tpl = _apply(tmap, partial.exp_template[keep_e])
@@ -430,3 +439,99 @@ def merge_maps(
         "" if shift_pose_cells else " (not applied)",
     )
     return MergeResult(state=dataclasses.replace(merged), info=info)
+
+
+def fuse_templates(
+    state: MapState, pairs: list[tuple[int, int]]
+) -> tuple[MapState, np.ndarray, list[tuple[int, int]]]:
+    """Identify templates of one map with others, as the merge identifies ``z`` with ``u``.
+
+    For every ``(drop, keep)`` pair, template ``drop`` is removed; each of its
+    experiences is removed too and the links that ended or started at it are re-pointed
+    at ``keep``'s first experience (link measurements are relative and stay valid; a
+    link that would join an experience to itself, or a pair already linked, is dropped). Used by
+    :class:`~torchratslam.multisession.session.MultiSessionRatSLAM` with
+    ``merge_absorb=True``: the partial templates that had already matched the stored
+    map before a delayed merge are the stored map's places seen again.
+
+    Args:
+        state: the map (normally just merged).
+        pairs: ``(drop, keep)`` template ids; a pair whose ``keep`` has no experience,
+            or whose ``drop`` is also a ``keep``, is skipped.
+
+    Returns:
+        ``(fused map, old -> new experience id map (-1 never happens: a removed
+        experience maps to its replacement), the pairs applied)``.
+    """
+    n_t, n_e = state.n_templates, state.n_experiences
+    keeps = {int(k) for _, k in pairs}
+    tgt_t = np.arange(n_t, dtype=np.int64)
+    tgt_e = np.arange(n_e, dtype=np.int64)
+    applied: list[tuple[int, int]] = []
+    for d, k in pairs:
+        d, k = int(d), int(k)
+        if d == k or d in keeps or not (0 <= d < n_t and 0 <= k < n_t):
+            continue
+        e_k = first_experience(state, k)
+        if e_k < 0:
+            continue
+        tgt_t[d] = k
+        tgt_e[state.exp_template == d] = e_k
+        applied.append((d, k))
+    keep_t = tgt_t == np.arange(n_t)
+    keep_e = tgt_e == np.arange(n_e)
+    if keep_t.all() and keep_e.all():
+        return state, np.arange(n_e, dtype=np.int64), applied
+    new_t = np.cumsum(keep_t) - 1  # new id of every kept template
+    new_e = np.cumsum(keep_e) - 1
+    tmap = new_t[tgt_t]
+    emap = new_e[tgt_e]
+    lf, lt = _apply(emap, state.link_from), _apply(emap, state.link_to)
+    keep_l = lf != lt
+    # one link per pair of experiences: a re-pointed link that duplicates one the map
+    # already has is dropped, the earlier one kept
+    pair = np.stack([lf, lt], axis=1)
+    _, first = np.unique(pair, axis=0, return_index=True)
+    unique = np.zeros(lf.shape[0], bool)
+    unique[first] = True
+    keep_l &= unique
+    keep_of = {"template": keep_t, "exp": keep_e, "link": keep_l}
+    extra: dict[str, np.ndarray] = {}
+    for key, val in state.extra.items():
+        prefix = key.split(":", 1)[0] if ":" in key else ""
+        if prefix in PER_ENTITY:
+            extra[key] = np.asarray(val)[keep_of[prefix]]
+        elif key == "ref.goal_list":
+            extra[key] = _apply(emap, np.asarray(val, np.int64))
+        else:
+            extra[key] = val
+    fused = dataclasses.replace(
+        state,
+        templates=state.templates[keep_t],
+        template_mean=state.template_mean[keep_t],
+        template_frame=state.template_frame[keep_t],
+        template_pc=state.template_pc[keep_t],
+        template_decay=state.template_decay[keep_t],
+        exp_pose=state.exp_pose[keep_e],
+        exp_pc=state.exp_pc[keep_e],
+        exp_template=_apply(tmap, state.exp_template[keep_e]),
+        exp_frame=state.exp_frame[keep_e],
+        exp_t=state.exp_t[keep_e],
+        link_from=lf[keep_l],
+        link_to=lt[keep_l],
+        link_d=state.link_d[keep_l],
+        link_heading=state.link_heading[keep_l],
+        link_facing=state.link_facing[keep_l],
+        link_dt=state.link_dt[keep_l],
+        extra=extra,
+        current_vt=int(_apply(tmap, state.current_vt)),
+        prev_vt=int(_apply(tmap, state.prev_vt)),
+        current_exp=int(_apply(emap, state.current_exp)),
+        prev_exp=int(_apply(emap, state.prev_exp)),
+    )
+    log.info(
+        "fused %d templates and %d experiences into the stored map's",
+        int((~keep_t).sum()),
+        int((~keep_e).sum()),
+    )
+    return fused, emap, applied

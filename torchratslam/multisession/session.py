@@ -33,7 +33,7 @@ import torch
 
 from torchratslam.config import RatSLAMConfig
 from torchratslam.graph.errors import ConfigError
-from torchratslam.maps.merge import merge_maps, pick_experience
+from torchratslam.maps.merge import fuse_templates, merge_maps, pick_experience
 from torchratslam.maps.state import (
     MapState,
     apply_state,
@@ -68,6 +68,15 @@ class MultiSessionRatSLAM:
         merge_persist: merge only when this many consecutive new templates match the
             same stored map (default 1: the first match merges, the paper). A
             deviation when > 1; the merge uses the last match.
+        merge_absorb: at a merge delayed by ``merge_threshold`` or ``merge_persist``,
+            also identify the partial templates that had already matched the same
+            stored map under ``vt_match_threshold`` (the paper's threshold; the
+            consecutive new templates just before the merge) with their matches, as the
+            merge does with ``z``: their experiences are dropped and their links
+            re-pointed at the stored matches' first experiences
+            (:func:`~torchratslam.maps.merge.fuse_templates`). Without it a delayed
+            merge keeps one copy of each such place. Default False; a deviation (the
+            paper merges at the first match, so there is nothing to absorb).
         **ratslam_kwargs: passed to :class:`~torchratslam.pipeline.RatSLAM`
             (``local_view``, ``pose_cells``, ``experience_map``, ``odometry``, ``dtype``,
             ``device``).
@@ -81,6 +90,8 @@ class MultiSessionRatSLAM:
             map), ``error``, ``loaded_template``, ``loaded_exp``, ``loaded_exp_t`` and
             ``partial_exp_t`` (creation times of the two matched experiences), ``pc_shift``,
             ``transform`` (dth, tx, ty), ``templates_added``, ``experiences_added``,
+            ``absorbed`` (``merge_absorb``: the (template, stored template) pairs
+            identified besides ``z``, in the merged map's ids before the fusion),
             ``time_s``.
         snapshots: per merge: ``loaded`` and ``partial`` experience poses (N, 3) before
             the merge, ``merged`` after it (before relaxation), ``relaxed`` after the
@@ -100,6 +111,7 @@ class MultiSessionRatSLAM:
         merge_options: dict[str, Any] | None = None,
         merge_threshold: float | None = None,
         merge_persist: int = 1,
+        merge_absorb: bool = False,
         **ratslam_kwargs: Any,
     ) -> None:
         if merge_threshold is not None and not merge_threshold > 0:
@@ -109,6 +121,10 @@ class MultiSessionRatSLAM:
         self.merge_threshold = None if merge_threshold is None else float(merge_threshold)
         self.merge_persist = int(merge_persist)
         self._streak = (-1, 0)  # (stored map, consecutive new templates matching it)
+        self.merge_absorb = bool(merge_absorb)
+        # (partial template, stored map, stored template): the consecutive new templates
+        # that matched a stored map under vt_match_threshold without merging yet
+        self._seen: list[tuple[int, int, int]] = []
         self.merge_options = dict(merge_options or {})
         self.slam = RatSLAM(config, **ratslam_kwargs)
         self.stored = [
@@ -204,20 +220,24 @@ class MultiSessionRatSLAM:
             return result
         template = self.slam.local_view.templates[int(result.view.template_id)]
         k, tid, offset, err = self.match_stored(template)
-        threshold = (
-            self.slam.config.local_view.vt_match_threshold
-            if self.merge_threshold is None
-            else self.merge_threshold
-        )
+        paper = self.slam.config.local_view.vt_match_threshold
+        threshold = paper if self.merge_threshold is None else self.merge_threshold
+        if k < 0 or err > paper:
+            self._seen = []
         if k < 0 or err > threshold:
             self._streak = (-1, 0)
+            if k >= 0 and err <= paper:
+                self._seen.append((int(result.view.template_id), k, tid))
             return result
         streak = self._streak[1] + 1 if self._streak[0] == k else 1
         self._streak = (k, streak)
         if streak < self.merge_persist:
+            self._seen.append((int(result.view.template_id), k, tid))
             return result
         self._streak = (-1, 0)
-        self.merge_with(k, tid, offset=offset, error=err, frame=result.frame)
+        absorb = [(p, t) for p, kk, t in self._seen if kk == k] if self.merge_absorb else []
+        self._seen = []
+        self.merge_with(k, tid, offset=offset, error=err, frame=result.frame, absorb=absorb)
         n_t, n_e, _ = self.slam.counts()
         return dataclasses.replace(
             result,
@@ -234,9 +254,13 @@ class MultiSessionRatSLAM:
         offset: int = 0,
         error: float = 0.0,
         frame: int | None = None,
+        absorb: list[tuple[int, int]] | None = None,
     ) -> dict[str, Any]:
         """Merge stored map ``k`` (matched at ``loaded_template``) into the running map
         now, relax, and record the merge.
+
+        ``absorb``: ``(partial template, stored template)`` pairs also identified
+        (``merge_absorb``; :func:`~torchratslam.maps.merge.fuse_templates`).
 
         Returns:
             The merge record appended to :attr:`merges`.
@@ -253,7 +277,13 @@ class MultiSessionRatSLAM:
             shift_pose_cells=self.shift_pose_cells,
             **self.merge_options,
         )
-        apply_state(res.state, self.slam, exp_ids=res.info["exp_ids"])
+        state, exp_ids, absorbed = res.state, res.info["exp_ids"], []
+        if absorb:
+            tmap = res.info["template_ids"]
+            pairs = [(int(tmap[p]), int(t)) for p, t in absorb if 0 <= p < tmap.size]
+            state, fmap, absorbed = fuse_templates(state, pairs)
+            exp_ids = fmap[np.asarray(exp_ids, np.int64)]
+        apply_state(state, self.slam, exp_ids=exp_ids)
         self.slam.experience_map.iterate()
         self.pending.remove(k)
         if self.keep_snapshots:
@@ -261,10 +291,10 @@ class MultiSessionRatSLAM:
                 {
                     "loaded": loaded.exp_pose.copy(),
                     "partial": partial.exp_pose.copy(),
-                    "merged": res.state.exp_pose.copy(),
+                    "merged": state.exp_pose.copy(),
                     "relaxed": np.asarray(self.slam.experience_map.poses, np.float64).copy(),
                     "n_loaded": np.array(loaded.n_experiences),
-                    "merged_state": res.state,
+                    "merged_state": state,
                     "partial_state": partial,
                 }
             )
@@ -286,8 +316,9 @@ class MultiSessionRatSLAM:
             "pc_shift": res.info["pc_shift"],
             "pc_shift_applied": res.info["pc_shift_applied"],
             "transform": [float(v) for v in res.info["transform"]],
-            "templates_added": res.info["templates_added"],
-            "experiences_added": res.info["experiences_added"],
+            "templates_added": state.n_templates - loaded.n_templates,
+            "experiences_added": state.n_experiences - loaded.n_experiences,
+            "absorbed": [list(p) for p in absorbed],
             "time_s": time.perf_counter() - t0,
         }
         self.merges.append(rec)
