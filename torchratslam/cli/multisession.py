@@ -106,6 +106,18 @@ def register(subparsers: Any) -> argparse.ArgumentParser:
         "--merge-persist 2",
     )
     p.add_argument(
+        "--merge-absorb",
+        action="store_true",
+        help="at a delayed merge (--merge-persist > 1), merge the templates that already "
+        "matched the stored map into their matches too; a deviation, e.g. --merge-absorb",
+    )
+    p.add_argument(
+        "--recommended-merge",
+        action="store_true",
+        help="the merge measured best across seeds: --pc-shift-rotate --merge-persist 2 "
+        "--merge-absorb (docs/multisession.md), e.g. --recommended-merge",
+    )
+    p.add_argument(
         "--max-frames",
         type=int,
         default=None,
@@ -181,6 +193,7 @@ def _seeds_main(args: argparse.Namespace, overrides: dict[str, str], merge: dict
         on_row=on_row,
         merge_threshold=args.merge_threshold,
         merge_persist=args.merge_persist,
+        merge_absorb=args.merge_absorb,
     )
     text = seed_table_markdown(table)
     atomic_write_text(out / "seeds.json", json.dumps(table, indent=1) + "\n")
@@ -206,6 +219,9 @@ def main(args: argparse.Namespace) -> int:
         for k, v in (("exp_pc_shift", args.exp_pc_shift), ("match_exp", args.match_exp))
         if v != {"exp_pc_shift": "experiences", "match_exp": "first"}[k]
     }
+    if args.recommended_merge:
+        args.pc_shift_rotate, args.merge_absorb = True, True
+        args.merge_persist = max(args.merge_persist, 2)
     if args.pc_shift_rotate:
         merge["pc_shift_rotate"] = True
     if args.seeds is not None:
@@ -224,6 +240,7 @@ def main(args: argparse.Namespace) -> int:
         merge_options=merge,
         merge_threshold=args.merge_threshold,
         merge_persist=args.merge_persist,
+        merge_absorb=args.merge_absorb,
         rerun=args.rerun,
         rerun_save=args.rerun_save,
     )

@@ -202,3 +202,27 @@ def dataclasses_replace(state, t):
         exp_frame=np.arange(m, dtype=np.int64),
         exp_t=np.asarray(t, np.float64),
     )
+
+
+def test_cli_recommended_merge_passes_the_bundle(tmp_path, monkeypatch):
+    """``--recommended-merge`` is ``--pc-shift-rotate --merge-persist 2 --merge-absorb``,
+    and each flag reaches the seed table on its own."""
+    import torchratslam.experiments.multisession_tour as mt
+    from torchratslam.cli import main
+
+    seen: list[dict] = []
+
+    def fake_table(tour, seeds, **kw):
+        seen.append(kw)
+        return {"tour": tour, "seeds": list(seeds), "rows": {}}
+
+    monkeypatch.setattr(mt, "seed_table", fake_table)
+    monkeypatch.setattr(mt, "seed_table_markdown", lambda table: "table")
+    argv = ["multisession", "--tour", "sim:virtual_tour", "--seeds", "0-1", "--quiet"]
+    assert main([*argv, "--out", str(tmp_path / "a"), "--recommended-merge"]) == 0
+    assert main([*argv, "--out", str(tmp_path / "b"), "--merge-absorb"]) == 0
+    rec, absorb = seen
+    assert rec["merge_options"] == mt.RECOMMENDED_MERGE_OPTIONS
+    assert {k: rec[k] for k in mt.RECOMMENDED_SESSION_OPTIONS} == mt.RECOMMENDED_SESSION_OPTIONS
+    assert absorb["merge_absorb"] and absorb["merge_persist"] == 1
+    assert "pc_shift_rotate" not in absorb["merge_options"]
