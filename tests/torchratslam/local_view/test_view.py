@@ -523,7 +523,9 @@ def test_compiled_screening_gives_the_torch_search_bit_for_bit(panoramic, dtype)
     lv.matcher.compiled = True
 
 
-@pytest.mark.parametrize(("x", "shift", "step"), [(1, 0, 1), (2, 0, 1), (3, 1, 1), (9, 4, 3), (10, 2, 2)])
+@pytest.mark.parametrize(
+    ("x", "shift", "step"), [(1, 0, 1), (2, 0, 1), (3, 1, 1), (9, 4, 3), (10, 2, 2)]
+)
 def test_compiled_search_on_narrow_windows(x, shift, step):
     """Windows of one or two columns (no column pair, or one) and odd offsets."""
     rng = np.random.default_rng(x * 10 + shift)
