@@ -774,6 +774,8 @@ def place_counts(
         ``experiences``, ``repeats``, ``places``, ``radius_m``, and with
         ``session_frames``: ``unseen``, ``places_seen`` (places the sessions see).
     """
+    from torchratslam.graph.geometry import wrap_angle
+
     n = state.n_experiences
     out: dict[str, Any] = {"experiences": n, "repeats": 0, "places": n, "radius_m": 0.0}
     if n == 0:
@@ -787,7 +789,7 @@ def place_counts(
 
     def near(q: np.ndarray, hq: np.ndarray) -> np.ndarray:
         d = np.linalg.norm(p[:, None, :] - q[None, :, :], axis=2)
-        dh = np.abs((h[:, None] - hq[None, :] + np.pi) % (2 * np.pi) - np.pi)
+        dh = np.abs(wrap_angle(h[:, None] - hq[None, :]))
         return (d <= r) & (dh <= hmax)
 
     rank = np.empty(n, np.int64)

@@ -177,15 +177,17 @@ def search_normal(  # pragma: no cover - compiled
             o = offsets[ki]
             b = vcols[0] * 0
             base = (o % 2) * half + o // 2
+            row = pairs[t, base : base + nb]  # indices from range(): no wraparound checks
             for j in range(nb):
-                b += abs(pairs[t, base + j] - vpairs[j])
+                b += abs(row[j] - vpairs[j])
             if b > cut:
                 if b < pruned:
                     pruned = b
                 continue
             b = cols[t, 0] * 0
+            win = cols[t, o : o + width]
             for c in range(width):
-                b += abs(cols[t, o + c] - vcols[c])
+                b += abs(win[c] - vcols[c])
             if b > cut:
                 if b < pruned:
                     pruned = b
@@ -193,8 +195,10 @@ def search_normal(  # pragma: no cover - compiled
             s = 0.0
             out = False
             for y in range(ny):
+                trow = data[t, y, o : o + width]
+                vrow = view[y, shift : shift + width]
                 for c in range(width):
-                    s += abs(np.float64(data[t, y, o + c]) - np.float64(view[y, shift + c]))
+                    s += abs(np.float64(trow[c]) - np.float64(vrow[c]))
                 if s > cut:
                     out = True
                     break
