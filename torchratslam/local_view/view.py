@@ -784,8 +784,8 @@ class TemplateMatcher:
                 margin,
             )
             pruned = min(pruned, low)
-            sel = torch.from_numpy(sad64 <= min(best64, cap) + margin)
-            evaluate(t[sel], k[sel])
+            keep64 = torch.from_numpy(sad64 <= min(best64, cap) + margin)
+            evaluate(t[keep64], k[keep64])
         elif t.numel():
             s, size = 0, 16
             per = max(64, CHUNK_ELEMENTS // (self.y_size * self.x_size))

@@ -277,7 +277,8 @@ class MultiSessionRatSLAM:
             shift_pose_cells=self.shift_pose_cells,
             **self.merge_options,
         )
-        state, exp_ids, absorbed = res.state, res.info["exp_ids"], []
+        absorbed: list[tuple[int, int]] = []
+        state, exp_ids = res.state, res.info["exp_ids"]
         if absorb:
             tmap = res.info["template_ids"]
             pairs = [(int(tmap[p]), int(t)) for p, t in absorb if 0 <= p < tmap.size]
