@@ -224,7 +224,8 @@ PROFILES: dict[str, dict[str, Any]] = {
         "exp_relax_order": "openratslam",
     },
     # the recommended bundle: OpenRatSLAM plus the choices measured to be as good or
-    # better on every simulated set (docs/openratslam-fidelity.md, "When to use which")
+    # better on all but one simulated set (docs/openratslam-fidelity.md, "When to use
+    # which", has the numbers and the exception)
     "torchratslam": {
         "pc_decode": "exact",
         "vt_inject_rule": "openratslam",
