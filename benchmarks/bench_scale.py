@@ -41,7 +41,8 @@ SHARED_TOOLS = Path(__file__).resolve().parents[1].parent / "shared" / "tools" /
 
 def profiles() -> list[tuple[str, list[str]]]:
     """The torchratslam configurations measured: the reference behaviour, the
-    recommended profile and the budgeted relaxation (where this version has them)."""
+    recommended profile, the budgeted relaxation, and the budgeted relaxation
+    over-relaxed (the recommendation for long runs), where this version has them."""
     keys = RatSLAMConfig.key_owner()
     if "exp_relax_budget" in keys:
         return [
@@ -50,6 +51,11 @@ def profiles() -> list[tuple[str, list[str]]]:
             (
                 "torchratslam (openratslam + exp_relax_budget=20000)",
                 ["behaviour=openratslam", "exp_relax_budget=20000"],
+            ),
+            (
+                "torchratslam, long runs (openratslam + exp_relax_budget=20000 + "
+                "exp_correction=0.95)",
+                ["behaviour=openratslam", "exp_relax_budget=20000", "exp_correction=0.95"],
             ),
         ]
     if "behaviour" in keys:
