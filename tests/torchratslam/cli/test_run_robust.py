@@ -87,6 +87,26 @@ def test_a_bad_frame_keeps_the_map_and_resume_gives_the_uninterrupted_map(setup,
     assert "nothing to resume" in capsys.readouterr().err
 
 
+def test_the_budgeted_relaxation_resumes_where_it_stopped(setup, tmp_path, capsys):
+    """``exp_relax_budget`` goes on round the links from a saved position: a run stopped
+    by a bad frame and resumed makes the uninterrupted run's map, bit for bit."""
+    _, cfg, data, _ = setup
+    sets = ["--set", "exp_relax_budget=37", "--set", "exp_correction=0.95"]
+    full = tmp_path / "full"
+    assert main([*_argv(cfg, data, full), *sets]) == 0
+    ds = _copy_data(data, tmp_path / "ds")
+    good = (ds / "frames" / "000031.png").read_bytes()
+    (ds / "frames" / "000031.png").write_bytes(b"not a png")
+    out = tmp_path / "out"
+    assert main([*_argv(cfg, ds, out), *sets]) == 2
+    state = load_state(out)
+    assert state.frame_index == 31 and 5 * state.n_links > 37  # the budget binds
+    (ds / "frames" / "000031.png").write_bytes(good)
+    assert main(["run", "--resume", str(out), "--no-progress"]) == 0
+    _same_run(full, out)
+    capsys.readouterr()
+
+
 class _Interrupting:
     """Wraps a reader; sends this process a real SIGINT while frame ``at`` is read."""
 
