@@ -52,6 +52,39 @@ def get_signed_delta_rad(a1: float, a2: float) -> float:  # pragma: no cover - c
     return TWO_PI - delta if direction > 0 else -(TWO_PI - delta)
 
 
+@njit(cache=True, nogil=True, inline="always")
+def relax_link(
+    pose: np.ndarray, f: int, t: int, link: np.ndarray, k: int, c: float
+) -> bool:  # pragma: no cover - compiled
+    """OpenRatSLAM's update of one link ``k`` (``f -> t``), in place, its arithmetic;
+    True if any value changed."""
+    xf = pose[f, 0]
+    yf = pose[f, 1]
+    thf = pose[f, 2]
+    xt = pose[t, 0]
+    yt = pose[t, 1]
+    tht = pose[t, 2]
+    d = link[k, 0]
+    lx = xf + d * math.cos(thf + link[k, 1])
+    ly = yf + d * math.sin(thf + link[k, 1])
+    ex = (xt - lx) * c
+    ey = (yt - ly) * c
+    nxf = xf + ex
+    nyf = yf + ey
+    nxt = xt - ex
+    nyt = yt - ey
+    df = get_signed_delta_rad(thf + link[k, 2], tht)
+    nthf = clip_rad_180(thf + df * c)
+    ntht = clip_rad_180(tht - df * c)
+    pose[f, 0] = nxf
+    pose[f, 1] = nyf
+    pose[t, 0] = nxt
+    pose[t, 1] = nyt
+    pose[f, 2] = nthf
+    pose[t, 2] = ntht
+    return nxf != xf or nyf != yf or nxt != xt or nyt != yt or nthf != thf or ntht != tht
+
+
 @njit(cache=True, nogil=True)
 def sweep(
     pose: np.ndarray,
@@ -73,34 +106,8 @@ def sweep(
         ran += 1
         changed = False
         for k in range(src.shape[0]):
-            f = src[k]
-            t = dst[k]
-            xf = pose[f, 0]
-            yf = pose[f, 1]
-            thf = pose[f, 2]
-            xt = pose[t, 0]
-            yt = pose[t, 1]
-            tht = pose[t, 2]
-            d = link[k, 0]
-            lx = xf + d * math.cos(thf + link[k, 1])
-            ly = yf + d * math.sin(thf + link[k, 1])
-            ex = (xt - lx) * c
-            ey = (yt - ly) * c
-            nxf = xf + ex
-            nyf = yf + ey
-            nxt = xt - ex
-            nyt = yt - ey
-            df = get_signed_delta_rad(thf + link[k, 2], tht)
-            nthf = clip_rad_180(thf + df * c)
-            ntht = clip_rad_180(tht - df * c)
-            if nxf != xf or nyf != yf or nxt != xt or nyt != yt or nthf != thf or ntht != tht:
+            if relax_link(pose, src[k], dst[k], link, k, c):
                 changed = True
-            pose[f, 0] = nxf
-            pose[f, 1] = nyf
-            pose[t, 0] = nxt
-            pose[t, 1] = nyt
-            pose[f, 2] = nthf
-            pose[t, 2] = ntht
         if not changed:
             break
     return ran
@@ -129,34 +136,8 @@ def sweep_window(
     k = start % e
     changed = False
     for _ in range(count):
-        f = src[k]
-        t = dst[k]
-        xf = pose[f, 0]
-        yf = pose[f, 1]
-        thf = pose[f, 2]
-        xt = pose[t, 0]
-        yt = pose[t, 1]
-        tht = pose[t, 2]
-        d = link[k, 0]
-        lx = xf + d * math.cos(thf + link[k, 1])
-        ly = yf + d * math.sin(thf + link[k, 1])
-        ex = (xt - lx) * c
-        ey = (yt - ly) * c
-        nxf = xf + ex
-        nyf = yf + ey
-        nxt = xt - ex
-        nyt = yt - ey
-        df = get_signed_delta_rad(thf + link[k, 2], tht)
-        nthf = clip_rad_180(thf + df * c)
-        ntht = clip_rad_180(tht - df * c)
-        if nxf != xf or nyf != yf or nxt != xt or nyt != yt or nthf != thf or ntht != tht:
+        if relax_link(pose, src[k], dst[k], link, k, c):
             changed = True
-        pose[f, 0] = nxf
-        pose[f, 1] = nyf
-        pose[t, 0] = nxt
-        pose[t, 1] = nyt
-        pose[f, 2] = nthf
-        pose[t, 2] = ntht
         k += 1
         if k == e:
             k = 0

@@ -19,6 +19,43 @@ import numpy as np
 from numba import njit
 
 
+@njit(cache=True, nogil=True, inline="always")
+def early_sad(  # pragma: no cover - compiled
+    data: np.ndarray,
+    t: int,
+    view: np.ndarray,
+    o: int,
+    panoramic: bool,
+    width: int,
+    shift: int,
+    cut: float,
+) -> float:
+    """The float64 SAD of template ``t`` at column offset ``o`` against ``view``, summed
+    row by row; stops after the first row that takes it above ``cut`` (the partial sum,
+    a lower bound, is returned then).
+
+    Panoramic: template column ``c`` faces view column ``(c - o) mod X``; normal:
+    template columns ``o .. o + width - 1`` face view columns ``shift ..``.
+    """
+    ny, nx = view.shape[0], view.shape[1]
+    s = 0.0
+    for y in range(ny):
+        if panoramic:
+            for c in range(nx):
+                v = c - o
+                if v < 0:
+                    v += nx
+                s += abs(np.float64(data[t, y, c]) - np.float64(view[y, v]))
+        else:
+            trow = data[t, y, o : o + width]  # indices from range(): no wraparound checks
+            vrow = view[y, shift : shift + width]
+            for c in range(width):
+                s += abs(np.float64(trow[c]) - np.float64(vrow[c]))
+        if s > cut:
+            break
+    return s
+
+
 @njit(cache=True, nogil=True)
 def screen_pairs(  # pragma: no cover - compiled
     data: np.ndarray,
@@ -57,7 +94,6 @@ def screen_pairs(  # pragma: no cover - compiled
         sum less ``margin``, or the bound ``lb``).
     """
     n = t.shape[0]
-    ny, nx = view.shape[0], view.shape[1]
     sad = np.full(n, np.inf)
     best = best0
     pruned = np.inf
@@ -69,22 +105,8 @@ def screen_pairs(  # pragma: no cover - compiled
             break
         ti = t[i]
         o = offsets[k[i]]
-        s = 0.0
-        out = False
-        for y in range(ny):
-            if panoramic:
-                for c in range(nx):
-                    v = c - o
-                    if v < 0:
-                        v += nx
-                    s += abs(np.float64(data[ti, y, c]) - np.float64(view[y, v]))
-            else:
-                for c in range(width):
-                    s += abs(np.float64(data[ti, y, o + c]) - np.float64(view[y, shift + c]))
-            if s > cut:
-                out = True
-                break
-        if out:
+        s = early_sad(data, ti, view, o, panoramic, width, shift, cut)
+        if s > cut:
             if s - margin < pruned:
                 pruned = s - margin
             continue
@@ -156,7 +178,6 @@ def search_normal(  # pragma: no cover - compiled
     kk = offsets.shape[0]
     nb = vpairs.shape[0]
     half = pairs.shape[1] // 2
-    ny = view.shape[0]
     out_t = np.empty(n * kk, np.int64)
     out_k = np.empty(n * kk, np.int64)
     out_s = np.empty(n * kk, np.float64)
@@ -192,17 +213,8 @@ def search_normal(  # pragma: no cover - compiled
                 if b < pruned:
                     pruned = b
                 continue
-            s = 0.0
-            out = False
-            for y in range(ny):
-                trow = data[t, y, o : o + width]
-                vrow = view[y, shift : shift + width]
-                for c in range(width):
-                    s += abs(np.float64(trow[c]) - np.float64(vrow[c]))
-                if s > cut:
-                    out = True
-                    break
-            if out:
+            s = early_sad(data, t, view, o, False, width, shift, cut)
+            if s > cut:
                 if s - margin < pruned:
                     pruned = s - margin
                 continue

@@ -535,6 +535,21 @@ def test_converged_relaxation_stops_early_and_matches_always_running():
 
 
 # ------------------------------------------------------------ issue 12: OpenRatSLAM exactly
+def brute_force_link(p: list, f: int, t: int, link_k, c: float) -> None:
+    """OpenRatSLAM's update of one link ``f -> t`` on the pose lists ``p``, in place."""
+    f, t = p[f], p[t]
+    d, heading, facing = link_k
+    lx = f[0] + d * math.cos(f[2] + heading)
+    ly = f[1] + d * math.sin(f[2] + heading)
+    f[0] += (t[0] - lx) * c
+    f[1] += (t[1] - ly) * c
+    t[0] -= (t[0] - lx) * c
+    t[1] -= (t[1] - ly) * c
+    da = signed_delta(f[2] + facing, t[2])
+    f[2] = clip_rad_180(f[2] + da * c)
+    t[2] = clip_rad_180(t[2] - da * c)
+
+
 def brute_force_sweep(poses: np.ndarray, src, dst, link, passes: int, c: float) -> np.ndarray:
     """OpenRatSLAM's iterate() restated: experiences by id, their links in insertion order,
     every pass, in place."""
@@ -542,17 +557,7 @@ def brute_force_sweep(poses: np.ndarray, src, dst, link, passes: int, c: float) 
     order = sorted(range(len(src)), key=lambda k: (src[k], k))
     for _ in range(passes):
         for k in order:
-            f, t = p[src[k]], p[dst[k]]
-            d, heading, facing = link[k]
-            lx = f[0] + d * math.cos(f[2] + heading)
-            ly = f[1] + d * math.sin(f[2] + heading)
-            f[0] += (t[0] - lx) * c
-            f[1] += (t[1] - ly) * c
-            t[0] -= (t[0] - lx) * c
-            t[1] -= (t[1] - ly) * c
-            da = signed_delta(f[2] + facing, t[2])
-            f[2] = clip_rad_180(f[2] + da * c)
-            t[2] = clip_rad_180(t[2] - da * c)
+            brute_force_link(p, src[k], dst[k], link[k], c)
     return np.array(p)
 
 
@@ -635,17 +640,7 @@ def brute_force_window(poses: np.ndarray, src, dst, link, start: int, count: int
     i = start % len(order)
     for _ in range(count):
         k = order[i]
-        f, t = p[src[k]], p[dst[k]]
-        d, heading, facing = link[k]
-        lx = f[0] + d * math.cos(f[2] + heading)
-        ly = f[1] + d * math.sin(f[2] + heading)
-        f[0] += (t[0] - lx) * c
-        f[1] += (t[1] - ly) * c
-        t[0] -= (t[0] - lx) * c
-        t[1] -= (t[1] - ly) * c
-        da = signed_delta(f[2] + facing, t[2])
-        f[2] = clip_rad_180(f[2] + da * c)
-        t[2] = clip_rad_180(t[2] - da * c)
+        brute_force_link(p, src[k], dst[k], link[k], c)
         i = (i + 1) % len(order)
     return np.array(p), i
 
