@@ -12,6 +12,7 @@ import stat
 import subprocess
 import sys
 import textwrap
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -20,18 +21,7 @@ import torch
 from torchratslam.cli import main
 from torchratslam.maps.state import load_map, load_state, read_map_info
 
-SMALL = """\
-template_x_size: 32
-template_y_size: 8
-vt_panoramic: 1
-vt_step_match: 1
-vt_match_threshold: 0.06
-pc_dim_xy: 15
-pc_dim_th: 18
-pc_cell_x_size: 0.5
-pc_vt_inject_energy: 0.1
-exp_loops: 5
-"""
+SMALL = (Path(__file__).resolve().parents[2] / "data" / "small.yaml").read_text()
 N = 40
 
 

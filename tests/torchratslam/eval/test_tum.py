@@ -22,19 +22,11 @@ from torchratslam.eval.tum import (
 from torchratslam.pipeline import RatSLAM
 from torchratslam.readers.datasets import open_data
 
-SMALL = """\
-behaviour: torchratslam_v0
-template_x_size: 32
-template_y_size: 8
-vt_panoramic: 1
-vt_step_match: 1
-vt_match_threshold: 0.06
-pc_dim_xy: 15
-pc_dim_th: 18
-pc_cell_x_size: 0.5
-pc_vt_inject_energy: 0.1
-exp_loops: 5
-"""
+# the project's behaviour before issue 12, which these outputs were recorded with
+SMALL = (
+    "behaviour: torchratslam_v0\n"
+    + (Path(__file__).resolve().parents[2] / "data" / "small.yaml").read_text()
+)
 SIM = "sim:loop?laps=2&frames=120"
 
 

@@ -2,6 +2,7 @@
 file and compared with the run's own outputs."""
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -11,19 +12,11 @@ rr = pytest.importorskip("rerun", reason="rerun-sdk (the 'viewer' extra) is not 
 from torchratslam.cli import main  # noqa: E402
 from torchratslam.viz.rerun_viewer import ENTITIES  # noqa: E402
 
-SMALL = """\
-behaviour: torchratslam_v0
-template_x_size: 32
-template_y_size: 8
-vt_panoramic: 1
-vt_step_match: 1
-vt_match_threshold: 0.06
-pc_dim_xy: 15
-pc_dim_th: 18
-pc_cell_x_size: 0.5
-pc_vt_inject_energy: 0.1
-exp_loops: 5
-"""
+# the project's behaviour before issue 12, which these outputs were recorded with
+SMALL = (
+    "behaviour: torchratslam_v0\n"
+    + (Path(__file__).resolve().parents[2] / "data" / "small.yaml").read_text()
+)
 SIM = "sim:loop?laps=1&frames=40"
 N = 40
 
