@@ -90,6 +90,8 @@ class MultiSessionRatSLAM:
             map), ``error``, ``loaded_template``, ``loaded_exp``, ``loaded_exp_t`` and
             ``partial_exp_t`` (creation times of the two matched experiences), ``pc_shift``,
             ``transform`` (dth, tx, ty), ``templates_added``, ``experiences_added``,
+            ``partial_experiences`` (the partial map's experiences at the merge, the
+            dropped ``e_z`` included),
             ``absorbed`` (``merge_absorb``: the (template, stored template) pairs
             identified besides ``z``, in the merged map's ids before the fusion),
             ``time_s``.
@@ -319,6 +321,7 @@ class MultiSessionRatSLAM:
             "transform": [float(v) for v in res.info["transform"]],
             "templates_added": state.n_templates - loaded.n_templates,
             "experiences_added": state.n_experiences - loaded.n_experiences,
+            "partial_experiences": int(partial.n_experiences),
             "absorbed": [list(p) for p in absorbed],
             "time_s": time.perf_counter() - t0,
         }

@@ -140,6 +140,10 @@ def test_absorb_identifies_the_streak_with_the_stored_map(stored):
     assert n >= 1
     assert a["templates_added"] == p["templates_added"] - n
     assert a["experiences_added"] <= p["experiences_added"] - n
+    # the partial map is the same at both merges; without absorption the merge keeps
+    # every partial experience but the matched e_z
+    assert a["partial_experiences"] == p["partial_experiences"] >= 2
+    assert p["experiences_added"] == p["partial_experiences"] - 1
     assert absorbed.counts()[0] == plain.counts()[0] - n
 
 
@@ -162,9 +166,20 @@ def test_two_seeds_hold_with_the_recommended_merge():
         assert abs(row["diff"]) <= SEED_TOLERANCE, (seed, row)
         assert row["ablation_diff"] >= ABLATION_MARGIN, (seed, row)
         assert row["merges"] and all(m["distance_m"] <= WRONG_PLACE_M for m in row["merges"])
+        # the ablation re-makes at most the partial map's experiences (the only
+        # associations the shift moves): the ceiling the per-seed table reports
+        partial = sum(m["partial_experiences"] - 1 for m in row["merges"])
+        assert row["partial_experiences"] == partial >= 3
+        assert 0 < row["ablation"] - row["multi"] <= partial
+        assert row["ablation_ceiling"] == pytest.approx(
+            (row["multi"] + partial - row["single"]) / row["single"]
+        )
     assert table["within"] == 2 and table["ablation_above"] == 2 and table["wrong_merges"] == 0
+    assert table["within_one"] == 2 and table["ablation_reachable"] == 2
     text = seed_table_markdown(table)
     assert "| 2 | 6 |" in text and "2/2 seeds" in text
+    assert "| partial experiences merged (ablation ceiling) |" in text
+    assert "within one experience: 2/2 seeds" in text
 
 
 def test_place_counts_by_hand():
