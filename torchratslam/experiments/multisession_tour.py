@@ -15,7 +15,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import time
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -968,58 +968,50 @@ def seed_table_markdown(table: dict[str, Any]) -> str:
     """The per-seed table as Markdown (experiences: multisession / single, ablation)."""
     seeds = table["seeds"]
     rows = table["rows"]
-    head = "| seed | " + " | ".join(str(s) for s in seeds) + " |"
+
+    def line(label: str, cell: Callable[[dict[str, Any]], str]) -> str:
+        return f"| {label} | " + " | ".join(cell(rows[s]) for s in seeds) + " |"
+
     lines = [
         f"### {table['tour']}: experiences per seed",
         "",
-        head,
+        "| seed | " + " | ".join(str(s) for s in seeds) + " |",
         "|---|" + "---|" * len(seeds),
-        "| multi / single | "
-        + " | ".join(f"{rows[s]['multi']}/{rows[s]['single']}" for s in seeds)
-        + " |",
-        "| difference | " + " | ".join(_fmt(rows[s]["diff"], "+.1%") for s in seeds) + " |",
+        line("multi / single", lambda r: f"{r['multi']}/{r['single']}"),
+        line("difference", lambda r: _fmt(r["diff"], "+.1%")),
     ]
     if "ablation_above" in table:
         lines.append(
-            "| ablation (no pose-cell shift) | "
-            + " | ".join(
-                f"{rows[s]['ablation']} ({_fmt(rows[s]['ablation_diff'], '+.0%')})" for s in seeds
+            line(
+                "ablation (no pose-cell shift)",
+                lambda r: f"{r['ablation']} ({_fmt(r['ablation_diff'], '+.0%')})",
             )
-            + " |"
         )
     if all("ablation_ceiling" in rows[s] for s in seeds):
         lines.append(
-            "| partial experiences merged (ablation ceiling) | "
-            + " | ".join(
-                f"{rows[s]['partial_experiences']} ({_fmt(rows[s]['ablation_ceiling'], '+.1%')})"
-                for s in seeds
+            line(
+                "partial experiences merged (ablation ceiling)",
+                lambda r: f"{r['partial_experiences']} ({_fmt(r['ablation_ceiling'], '+.1%')})",
             )
-            + " |"
         )
     if all("single_places" in rows[s] for s in seeds):
         lines.append(
-            "| places multi / single (seen by the sessions) | "
-            + " | ".join(
-                f"{rows[s]['multi_places']['places_seen']}/{rows[s]['single_places']['places_seen']}"
-                for s in seeds
+            line(
+                "places multi / single (seen by the sessions)",
+                lambda r: f"{r['multi_places']['places_seen']}/{r['single_places']['places_seen']}",
             )
-            + " |"
         )
         lines.append(
-            "| single: repeats, unseen | "
-            + " | ".join(
-                f"{rows[s]['single_places']['repeats']}, {rows[s]['single_places']['unseen']}"
-                for s in seeds
+            line(
+                "single: repeats, unseen",
+                lambda r: f"{r['single_places']['repeats']}, {r['single_places']['unseen']}",
             )
-            + " |"
         )
     lines.append(
-        "| merge distance (m) | "
-        + " | ".join(
-            ", ".join(_fmt(m["distance_m"], ".2f") for m in rows[s]["merges"]) or "none"
-            for s in seeds
+        line(
+            "merge distance (m)",
+            lambda r: ", ".join(_fmt(m["distance_m"], ".2f") for m in r["merges"]) or "none",
         )
-        + " |"
     )
     n = len(seeds)
     lines += [
