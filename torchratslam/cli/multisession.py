@@ -42,7 +42,8 @@ def register(subparsers: Any) -> argparse.ArgumentParser:
     p.add_argument(
         "--tour",
         required=True,
-        help="sim:NAME (virtual_tour, lab_tour, irat_like), e.g. --tour sim:lab_tour",
+        help="sim:NAME (virtual_tour, lab_tour, irat_like), e.g. --tour sim:lab_tour; the "
+        "simulator's options after '?', e.g. 'sim:virtual_tour?session2_start=0.82&fog=20'",
     )
     p.add_argument("--out", required=True, help="output directory, e.g. --out out/ms")
     p.add_argument(

@@ -27,8 +27,10 @@ Every tour takes ``seed`` (textures, odometry noise, obstacles) and these option
   ``laser_max_range`` (30 m), ``laser_noise`` (0.01 m); front and rear scanners;
 * odometry: ``scale_error``, ``rot_scale_error``, ``heading_bias`` (rad/s),
   ``trans_noise`` (m/s), ``rot_noise`` (rad/s), or ``exact_odometry=True``;
-* motion: ``hz``; ``speed`` (lab_tour, irat_like), ``frames_per_lap`` (virtual_tour),
-  ``laps`` and ``frames`` (loop);
+* motion: ``hz``; ``speed`` (lab_tour, irat_like), ``frames_per_lap`` and
+  ``session2_start`` (virtual_tour: where session 2 starts, in laps from session 1's
+  start, inside the quarter session 1 leaves unmapped; default 0.873), ``laps`` and
+  ``frames`` (loop);
 * environment changes: ``illumination`` (relative gain amplitude, 0 = off) with
   ``illumination_mode`` ("session": one gain per session, the first at 1; "lap": one
   per lap; "drift": a slow sinusoid over each session), ``moved_obstacles`` (N boxes
@@ -815,11 +817,21 @@ def _check_clear(world: World, route: Route, clearance: float) -> None:
 
 
 def virtual_tour(
-    seed: int = 0, opts: _Opts | None = None, *, frames_per_lap: int = 150, hz: float = 1.0
+    seed: int = 0,
+    opts: _Opts | None = None,
+    *,
+    frames_per_lap: int = 150,
+    hz: float = 1.0,
+    session2_start: float = 0.873,
 ) -> _Build:
     """Ellipse (24 x 14 m) in a 36 x 26 m hall (multisession paper, Fig. 5)."""
     o = opts or _Opts()
     _positive(frames_per_lap=frames_per_lap - 3, hz=hz)
+    if isinstance(session2_start, bool) or not 0.75 < float(session2_start) < 1.0:
+        raise InputError(
+            f"tour option session2_start={session2_start!r}: session 2 starts in the quarter "
+            "session 1 leaves unmapped, between 0.75 and 1 lap (exclusive; default 0.873)"
+        )
     route = Route.ellipse(12.0, 7.0, start_deg=-90.0)
     # smooth textures (the paper's virtual world has smooth imagery): turning by one
     # template column (2.8 degrees) changes a view far less than vt_match_threshold, so
@@ -842,7 +854,12 @@ def virtual_tour(
     _check_clear(world, route, 1.5)
     ds = route.length / frames_per_lap
     n1 = round(0.75 * frames_per_lap) + 1
-    start2 = round(0.873 * frames_per_lap)
+    start2 = round(float(session2_start) * frames_per_lap)
+    if not n1 - 1 < start2 < frames_per_lap:
+        raise InputError(
+            f"tour option session2_start={session2_start!r} rounds to frame {start2} of "
+            f"{frames_per_lap}, outside the unmapped quarter; move it away from its ends"
+        )
     n2 = round(2.9 * frames_per_lap) + 1
     return _Build(
         world=world,

@@ -241,3 +241,33 @@ def test_cli_recommended_merge_passes_the_bundle(tmp_path, monkeypatch):
     assert {k: rec[k] for k in mt.RECOMMENDED_SESSION_OPTIONS} == mt.RECOMMENDED_SESSION_OPTIONS
     assert absorb["merge_absorb"] and absorb["merge_persist"] == 1
     assert "pc_shift_rotate" not in absorb["merge_options"]
+
+
+def test_tour_spec_options_reach_the_simulator():
+    """``--tour sim:NAME?key=value`` passes the simulator's options to every seed's tour
+    (and records them); a session, a seed in the spec or an unknown option is refused
+    with one line naming it."""
+    from torchratslam.graph.errors import InputError
+
+    from torchratslam.experiments.multisession_tour import parse_tour_spec
+
+    assert parse_tour_spec("sim:virtual_tour?session2_start=0.82&fog=20") == (
+        "virtual_tour",
+        {"session2_start": 0.82, "fog": 20},
+    )
+    assert parse_tour_spec("virtual_tour") == ("virtual_tour", {})
+    with pytest.raises(InputError, match="whole tour"):
+        parse_tour_spec("sim:virtual_tour/session2")
+    with pytest.raises(InputError, match="--seeds"):
+        parse_tour_spec("sim:virtual_tour?seed=3")
+    table = seed_table("sim:virtual_tour?session2_start=0.82", [0], ablation=False, max_frames=30)
+    assert table["tour_options"] == {"session2_start": 0.82}
+    assert "- tour options: {'session2_start': 0.82}" in seed_table_markdown(table)
+    # the option changed the tour: session 2 starts 8 frames earlier, so its first 30
+    # frames merge later than the default tour's
+    plain = seed_table("sim:virtual_tour", [0], ablation=False, max_frames=30)
+    early_merge = [m["frame"] for m in table["rows"][0]["merges"]]
+    plain_merge = [m["frame"] for m in plain["rows"][0]["merges"]]
+    assert early_merge and plain_merge and early_merge[0] > plain_merge[0]
+    with pytest.raises(InputError, match="did you mean 'session2_start'"):
+        seed_table("sim:virtual_tour?sesion2_start=0.82", [0], ablation=False, max_frames=5)

@@ -425,6 +425,35 @@ def test_continuous_virtual_tour_drives_the_unmapped_quarter():
     assert len(open_sim("sim:virtual_tour/continuous")) == len(c)
 
 
+def test_virtual_tour_session2_start_moves_only_session_two():
+    """``session2_start`` (laps from session 1's start) moves session 2's start along the
+    ellipse: session 1 and session 2's length stay, session 2's first pose is the route
+    point at that fraction of the lap, the stretch before session 1's start (the partial
+    map) grows, and the continuous run's bridge shrinks by as many frames."""
+    base, early = get_tour("virtual_tour"), get_tour("virtual_tour", session2_start=0.82)
+    assert np.array_equal(base.sessions[0].poses, early.sessions[0].poses)
+    assert len(early.sessions[1]) == len(base.sessions[1])
+    ell = early.routes["ellipse"]
+    first = early.sessions[1].poses[0, :2]
+    assert np.allclose(first, ell.at(np.array([round(0.82 * 150) * ell.length / 150]))[0])
+
+    def before_start(t):  # session 2's frames before it reaches session 1's start
+        d = np.linalg.norm(t.sessions[1].poses[:150, :2] - t.sessions[0].poses[0, :2], axis=1)
+        return int(np.argmin(d))
+
+    assert before_start(base) == 150 - round(0.873 * 150) == 19
+    assert before_start(early) == 150 - round(0.82 * 150) == 27
+    parts = {p["name"]: p for p in early.continuous().info["parts"]}
+    base_parts = {p["name"]: p for p in base.continuous().info["parts"]}
+    bridge = parts["bridge1"]["stop"] - parts["bridge1"]["start"]
+    assert 0 < bridge < base_parts["bridge1"]["stop"] - base_parts["bridge1"]["start"]
+    for bad in (0.75, 0.5, 1.0, True):
+        with pytest.raises(InputError, match="session2_start"):
+            get_tour("virtual_tour", session2_start=bad)
+    with pytest.raises(InputError, match="session2_start"):  # rounds onto session 1's start
+        get_tour("virtual_tour", session2_start=0.999)
+
+
 def test_single_session_tours_are_their_own_continuous_run():
     t = get_tour("loop", laps=0.1)
     assert t.continuous() is t.sessions[0]
