@@ -970,8 +970,7 @@ def seed_table(
             sum(
                 1
                 for r in rows.values()
-                if r["ablation_ceiling"] is not None
-                and r["ablation_ceiling"] >= ABLATION_MARGIN - 1e-12
+                if r["ablation_ceiling"] is not None and r["ablation_ceiling"] >= ABLATION_MARGIN
             )
         )
     return out
