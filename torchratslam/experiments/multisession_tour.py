@@ -37,6 +37,7 @@ __all__ = [
     "RECOMMENDED_SESSION_OPTIONS",
     "TOUR_CONFIG",
     "parse_tour_spec",
+    "partial_experiences",
     "place_counts",
     "report_markdown",
     "run_experiment",
@@ -813,6 +814,24 @@ def place_counts(
     return out
 
 
+def partial_experiences(merges: list[dict[str, Any]]) -> int:
+    """The partial maps' experiences that merges brought into the stored maps, each once.
+
+    They are the only experiences whose pose-cell associations the shift moves, so the
+    ablation without it can re-make at most these (measured: never more on the virtual
+    tour's seeds 0-19). A merge brings its partial map's experiences but the matched
+    ``e_z``; within a session the running map at a later merge holds the earlier
+    merges' partial maps (and the stored maps merged since), so a session counts at its
+    last merge.
+
+    Args:
+        merges: :attr:`MultiSessionRatSLAM.merges` records (``session``,
+            ``partial_experiences``), in order.
+    """
+    last = {m["session"]: m for m in merges}
+    return int(sum(max(int(m.get("partial_experiences", 0)) - 1, 0) for m in last.values()))
+
+
 def seed_row(
     config: RatSLAMConfig,
     tour: Any,
@@ -837,7 +856,8 @@ def seed_row(
     Returns:
         ``single``, ``multi``, ``ablation`` (experience counts), ``diff`` and
         ``ablation_diff`` (relative to single), ``partial_experiences`` (the partial
-        maps' experiences the merges brought in) and ``ablation_ceiling`` (the ablation's
+        maps' experiences the merges brought in, the matched ``e_z`` excluded, each
+        counted once: a session's at its last merge) and ``ablation_ceiling`` (the ablation's
         difference if it re-made every one of them: ``(multi + partial - single) /
         single``), ``single_places`` and ``multi_places``
         (:func:`place_counts`: repeats, distinct places, places the sessions see),
@@ -852,10 +872,7 @@ def seed_row(
     single, _ = _single_run(config, clock.cont.frames(), limit, False)
     multi = run_sessions(config, tour.sessions, offsets=clock.offsets, **kw)
     n_s, n_m = single.n_experiences, multi["maps"][-1].n_experiences
-    # the partial maps' experiences the merges brought in (each merge drops e_z): the
-    # only experiences whose pose-cell associations the shift moves, so the ablation
-    # can re-make at most these (measured: never more on virtual-tour seeds 0-19)
-    partial = sum(max(int(m.get("partial_experiences", 0)) - 1, 0) for m in multi["merges"])
+    partial = partial_experiences(multi["merges"])
     dist = merge_distances(multi["merges"], clock.gt)
     frames = np.concatenate(
         [np.arange(a, min(a + len(t), len(clock.gt))) for a, t in zip(clock.starts, tour.sessions)]

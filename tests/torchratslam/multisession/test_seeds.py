@@ -168,7 +168,8 @@ def test_two_seeds_hold_with_the_recommended_merge():
         assert row["merges"] and all(m["distance_m"] <= WRONG_PLACE_M for m in row["merges"])
         # the ablation re-makes at most the partial map's experiences (the only
         # associations the shift moves): the ceiling the per-seed table reports
-        partial = sum(m["partial_experiences"] - 1 for m in row["merges"])
+        (merge,) = row["merges"]  # one merge: its partial map, e_z excluded
+        partial = merge["partial_experiences"] - 1
         assert row["partial_experiences"] == partial >= 3
         assert 0 < row["ablation"] - row["multi"] <= partial
         assert row["ablation_ceiling"] == pytest.approx(
@@ -271,3 +272,19 @@ def test_tour_spec_options_reach_the_simulator():
     assert early_merge and plain_merge and early_merge[0] > plain_merge[0]
     with pytest.raises(InputError, match="did you mean 'session2_start'"):
         seed_table("sim:virtual_tour?sesion2_start=0.82", [0], ablation=False, max_frames=5)
+
+
+def test_partial_experiences_counts_each_session_once():
+    """Two merges in one session (the running map at the second holds the first's
+    partial map) count at the second; another session's merge adds its own; each merge
+    drops its matched experience e_z; a merge of a one-experience map brings nothing."""
+    from torchratslam.experiments.multisession_tour import partial_experiences
+
+    merges = [
+        {"session": "session5", "partial_experiences": 5},
+        {"session": "session5", "partial_experiences": 12},
+        {"session": "session2", "partial_experiences": 4},
+        {"session": "session3", "partial_experiences": 1},
+    ]
+    assert partial_experiences(merges) == (12 - 1) + (4 - 1) + 0
+    assert partial_experiences([]) == 0
