@@ -621,6 +621,21 @@ def parse_tour_spec(spec: str) -> tuple[str, dict[str, Any]]:
     return name, options
 
 
+def _tour_setup(
+    tour_spec: str, config: Any, overrides: dict[str, Any] | None
+) -> tuple[str, dict[str, Any], RatSLAMConfig]:
+    """The tour name and options of ``tour_spec`` and the config: ``config`` (a
+    ``RatSLAMConfig`` or a path/name) or the tour's shipped one, ``overrides`` applied."""
+    name, tour_options = parse_tour_spec(tour_spec)
+    if config is None:
+        config = load_config(TOUR_CONFIG.get(name))
+    elif isinstance(config, (str, Path)):
+        config = load_config(config)
+    if overrides:
+        config = config.replace(**overrides)
+    return name, tour_options, config
+
+
 def _write_json(path: Path, obj: Any) -> None:
     """Atomic JSON write (the one atomic writer, :mod:`torchratslam.graph.atomic`)."""
     text = json.dumps(obj, indent=1, default=lambda v: v.item() if hasattr(v, "item") else str(v))
@@ -670,13 +685,7 @@ def run_experiment(
     from torchratslam.sim import get_tour
     from torchratslam.viz.multisession import write_figures
 
-    name, tour_options = parse_tour_spec(tour_spec)
-    if config is None:
-        config = load_config(TOUR_CONFIG.get(name))
-    elif isinstance(config, (str, Path)):
-        config = load_config(config)
-    if overrides:
-        config = config.replace(**overrides)
+    name, tour_options, config = _tour_setup(tour_spec, config, overrides)
     tour = get_tour(name, seed=seed, **tour_options)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -943,13 +952,7 @@ def seed_table(
     """
     from torchratslam.sim import get_tour
 
-    name, tour_options = parse_tour_spec(tour_spec)
-    if config is None:
-        config = load_config(TOUR_CONFIG.get(name))
-    elif isinstance(config, (str, Path)):
-        config = load_config(config)
-    if overrides:
-        config = config.replace(**overrides)
+    name, tour_options, config = _tour_setup(tour_spec, config, overrides)
     rows: dict[int, dict[str, Any]] = {}
     for seed in seeds:
         row = seed_row(
