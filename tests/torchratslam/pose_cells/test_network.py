@@ -32,15 +32,6 @@ def _params(**kw) -> PoseCellParams:
     return PoseCellParams(**{**PROJECT, **kw})
 
 
-@pytest.fixture(autouse=True, scope="module")
-def _one_thread():
-    """Small tensors: one thread is faster and immune to a busy machine."""
-    before = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(before)
-
-
 # ----------------------------------------------------------------- references
 def brute_kernel(dim: int, var: float) -> np.ndarray:
     """3D weights straight from the definition: exp(-(i^2+j^2+k^2) / (2 var^2)) around

@@ -29,14 +29,6 @@ TRACES = ("irat_like", "loop_default", "fast_turns")
 F64 = torch.float64
 
 
-@pytest.fixture(autouse=True, scope="module")
-def _one_thread():
-    before = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(before)
-
-
 def load_trace(name: str) -> tuple[PoseCellParams, np.ndarray]:
     cp = configparser.ConfigParser()
     cp.read(DATA / f"{name}.txt")

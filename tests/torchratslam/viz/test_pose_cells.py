@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import matplotlib.image as mpimg
 import numpy as np
-import pytest
 import torch
 
 from torchratslam.config import PoseCellParams
@@ -14,15 +13,6 @@ from torchratslam.experiments.pose_cell_demo import (
     scripted_odometry,
 )
 from torchratslam.viz.pose_cells import plot_activity, projections, split_at_wraps
-
-
-@pytest.fixture(autouse=True, scope="module")
-def _one_thread():
-    """Small tensors: one thread is faster and immune to a busy machine."""
-    before = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(before)
 
 
 def test_split_at_wraps_cuts_only_at_ring_jumps():
