@@ -5,11 +5,8 @@ BIN     := $(VENV)/bin
 STAMP   := $(VENV)/.installed
 TORCH   := torch==2.13.0
 OUT     ?= out
-# The package as it installs (torchratslam/graph -> graph/, torchratslam/presets ->
-# configs/), as symlinks, for mypy and lint-imports, which cannot follow package-dir.
-VIEW    := build/lint
 
-.PHONY: all install demo test bench lint lint-view format clean docs notebooks fuzz
+.PHONY: all install demo test bench lint format clean docs notebooks fuzz
 
 all: test
 
@@ -18,9 +15,9 @@ $(BIN)/python:
 	$(BIN)/python -m pip install --quiet --upgrade pip
 
 # Torch first (the pinned CPU build), then the project and its dev extras.
-$(STAMP): $(BIN)/python pyproject.toml
+$(STAMP): $(BIN)/python pyproject.toml graph/pyproject.toml
 	$(BIN)/python -m pip install --quiet $(TORCH)
-	$(BIN)/python -m pip install --quiet -e ".[dev]"
+	$(BIN)/python -m pip install --quiet -e ./graph -e ".[dev]"
 	touch $(STAMP)
 
 install: $(STAMP)
@@ -50,19 +47,12 @@ docs: $(STAMP)
 notebooks: $(STAMP)
 	$(BIN)/python notebooks/execute.py
 
-lint-view:
-	rm -rf $(VIEW)
-	mkdir -p $(VIEW)/torchratslam
-	ln -s $(CURDIR)/torchratslam/* $(VIEW)/torchratslam/
-	ln -s $(CURDIR)/graph $(VIEW)/torchratslam/graph
-	ln -s $(CURDIR)/configs $(VIEW)/torchratslam/presets
-
 # ruff, mypy and the import contracts ([tool.importlinter]); each must report nothing.
-lint: $(STAMP) lint-view
+lint: $(STAMP)
 	$(BIN)/ruff check .
 	$(BIN)/ruff format --check .
-	MYPYPATH=$(VIEW) $(BIN)/mypy -p torchratslam
-	cd $(VIEW) && $(CURDIR)/$(BIN)/lint-imports --config $(CURDIR)/pyproject.toml --no-cache
+	$(BIN)/mypy -p torchratslam -p ratslam_graph
+	PYTHONPATH=graph:. $(BIN)/lint-imports --no-cache
 
 format: $(STAMP)
 	$(BIN)/ruff format .

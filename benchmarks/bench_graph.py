@@ -14,10 +14,10 @@ import os
 import time
 
 import numpy as np
-from torchratslam.graph.backends import GraphErrorEvaluator, make_backend
-from torchratslam.graph.geometry import ate_rmse
-from torchratslam.graph.io import example_file, read_posegraph, read_poses
-from torchratslam.graph.posegraph import PoseGraph
+from ratslam_graph.backends import GraphErrorEvaluator, make_backend
+from ratslam_graph.geometry import ate_rmse
+from ratslam_graph.io import example_file, read_posegraph, read_poses
+from ratslam_graph.posegraph import PoseGraph
 
 # issue 4: compiled reference-order alpha loop, 1000 passes (error, seconds)
 COMPILED_1000 = {"w10000": (571.0, 2.19), "city10000": (1.01e5, 0.79)}

@@ -2,7 +2,7 @@
 every part of the package, and catch a forbidden import.
 
 lint-imports reads the package from a view of symlinks laid out as it installs
-(``torchratslam/graph`` -> ``graph/``, ``torchratslam/presets`` -> ``configs/``), the
+(``ratslam_graph`` -> ``graph/``, ``torchratslam/presets`` -> ``configs/``), the
 same view ``make lint`` builds under ``build/lint``.
 """
 
@@ -60,9 +60,9 @@ def _lint_imports(view: Path) -> subprocess.CompletedProcess:
 
 def test_the_contracts_name_every_part_of_the_package():
     parts = _parts()
-    assert {"torchratslam.graph", "torchratslam.maps", "torchratslam.pipeline"} <= parts
+    assert {"ratslam_graph", "torchratslam.maps", "torchratslam.pipeline"} <= parts
     graph = CONTRACTS["graph"]
-    assert set(graph["forbidden_modules"]) == parts - {"torchratslam.graph"} | {"torch"}
+    assert set(graph["forbidden_modules"]) == parts - {"ratslam_graph"} | {"torch"}
     library = CONTRACTS["library"]
     assert set(library["source_modules"]) == parts - APPS
     assert set(library["forbidden_modules"]) == APPS - {"torchratslam.__main__"}
@@ -72,9 +72,9 @@ def test_the_contracts_name_every_part_of_the_package():
     stages = CONTRACTS["stages"]["layers"]
     assert stages.index("torchratslam.readers") < stages.index("torchratslam.local_view")
     assert stages.index("torchratslam.pose_cells") < stages.index(
-        "torchratslam.graph.experience_map"
+        "ratslam_graph.experience_map"
     )
-    assert stages[-1] == "torchratslam.graph.backends"
+    assert stages[-1] == "ratslam_graph.backends"
 
 
 def test_the_package_keeps_every_contract(tmp_path):
@@ -90,7 +90,7 @@ def test_the_package_keeps_every_contract(tmp_path):
         ("graph", "from torchratslam.config import load_config\n", "graph"),
         ("pose_cells", "from torchratslam.local_view import view\n", "stages"),
         ("graph", "from torchratslam.pose_cells import network\n", "graph"),
-        ("graph/backends", "from torchratslam.graph import experience_map\n", "stages"),
+        ("graph/backends", "from ratslam_graph import experience_map\n", "stages"),
         ("readers", "from torchratslam import pipeline\n", "stages"),
         ("maps", "from torchratslam.cli import run\n", "library"),
         ("sim", "from torchratslam.experiments import demo\n", "library"),

@@ -1,6 +1,6 @@
-"""``graph/`` (installed as ``torchratslam.graph``) is the torch-free bottom layer.
+"""``graph/`` (installed as ``ratslam_graph``) is the torch-free bottom layer.
 
-It may import itself (``torchratslam.graph...``) but never torch nor any other part
+It may import itself (``ratslam_graph...``) but never torch nor any other part
 of torchratslam.
 """
 
@@ -24,7 +24,7 @@ def _forbidden_imports(path: Path) -> set[str]:
         n
         for n in names
         if n.split(".")[0] == "torch"
-        or (n.split(".")[0] == "torchratslam" and not n.startswith("torchratslam.graph"))
+        or (n.split(".")[0] == "torchratslam" and not n.startswith("ratslam_graph"))
     }
 
 
@@ -59,5 +59,5 @@ def test_the_checker_detects_a_forbidden_import(tmp_path):
     bad.write_text("import os\nfrom torchratslam.config import load_config\n")
     assert _forbidden_imports(bad) == {"torchratslam.config"}
     ok = tmp_path / "ok.py"
-    ok.write_text("from torchratslam.graph.errors import InputError\n")
+    ok.write_text("from ratslam_graph.errors import InputError\n")
     assert _forbidden_imports(ok) == set()

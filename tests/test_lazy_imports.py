@@ -30,11 +30,11 @@ def test_import_torchratslam_loads_neither_torch_nor_gtsam(tmp_path):
 
 def test_experience_map_relaxed_by_the_alpha_rule_loads_no_gtsam(tmp_path):
     code = """
-import torchratslam.graph
-from torchratslam.graph.backends import make_backend
-from torchratslam.graph.experience_map import ExperienceMap
-from torchratslam.graph.messages import Action, ActionKind
-from torchratslam.graph.params import ExperienceMapParams
+import ratslam_graph
+from ratslam_graph.backends import make_backend
+from ratslam_graph.experience_map import ExperienceMap
+from ratslam_graph.messages import Action, ActionKind
+from ratslam_graph.params import ExperienceMapParams
 
 em = ExperienceMap(ExperienceMapParams(exp_backend="alpha", exp_loops=5))
 for i in range(4):
@@ -52,8 +52,8 @@ make_backend("alpha_reference").relax(em.posegraph(), passes=2)
 def test_the_gtsam_backends_still_load_and_relax(tmp_path):
     code = """
 import numpy as np
-from torchratslam.graph.backends import GraphErrorEvaluator, make_backend
-from torchratslam.graph.posegraph import PoseGraph
+from ratslam_graph.backends import GraphErrorEvaluator, make_backend
+from ratslam_graph.posegraph import PoseGraph
 
 poses = np.array([[0.0, 0, 0], [1.1, 0, 0], [2.0, 0.2, 0]])
 edges = np.array([[0, 1], [1, 2], [0, 2]])
@@ -69,12 +69,12 @@ for name in ("gtsam", "isam2"):
 
 @pytest.mark.parametrize("name", ["GtsamBackend", "factor_graph", "nope"])
 def test_lazy_names_resolve_or_fail_like_attributes(name):
-    import torchratslam.graph.backends as backends
+    import ratslam_graph.backends as backends
 
     if name == "nope":
         with pytest.raises(AttributeError, match="nope"):
             getattr(backends, name)
     else:
-        from torchratslam.graph.backends import gtsam_backend
+        from ratslam_graph.backends import gtsam_backend
 
         assert getattr(backends, name) is getattr(gtsam_backend, name)

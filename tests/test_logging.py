@@ -118,8 +118,8 @@ def test_skipped_files_and_missing_odometry_are_logged(tmp_path, caplog):
 
 
 def test_an_unconverged_lm_solve_is_logged(caplog):
-    from torchratslam.graph.backends import make_backend
-    from torchratslam.graph.posegraph import PoseGraph
+    from ratslam_graph.backends import make_backend
+    from ratslam_graph.posegraph import PoseGraph
 
     rng = np.random.default_rng(3)
     n = 30
@@ -133,14 +133,14 @@ def test_an_unconverged_lm_solve_is_logged(caplog):
     with caplog.at_level(logging.WARNING, logger="torchratslam"):
         make_backend("gtsam", max_iterations=1).relax(pg, passes=0)
     (rec,) = caplog.records
-    assert rec.name == "torchratslam.graph.backends.gtsam_backend"
+    assert rec.name == "ratslam_graph.backends.gtsam_backend"
     assert "limit of 1 iterations" in rec.getMessage()
 
 
 def test_a_relaxation_that_keeps_moving_is_logged_at_debug(caplog):
-    from torchratslam.graph.experience_map import ExperienceMap
-    from torchratslam.graph.messages import Action, ActionKind
-    from torchratslam.graph.params import ExperienceMapParams
+    from ratslam_graph.experience_map import ExperienceMap
+    from ratslam_graph.messages import Action, ActionKind
+    from ratslam_graph.params import ExperienceMapParams
 
     em = ExperienceMap(ExperienceMapParams(exp_loops=1))
     for i in range(4):
@@ -149,5 +149,5 @@ def test_a_relaxation_that_keeps_moving_is_logged_at_debug(caplog):
     em.apply(Action(ActionKind.LINK, dest_id=0))
     with caplog.at_level(logging.DEBUG, logger="torchratslam"):
         em.iterate()
-    (rec,) = [r for r in caplog.records if r.name == "torchratslam.graph.experience_map"]
+    (rec,) = [r for r in caplog.records if r.name == "ratslam_graph.experience_map"]
     assert rec.levelno == logging.DEBUG and "1 passes of 'alpha'" in rec.getMessage()

@@ -1,11 +1,11 @@
 """The package installs and imports like a library.
 
-* import names: a user's own ``graph.py`` / ``configs.py`` in the working directory
-  does not shadow anything (the torch-free half is ``torchratslam.graph``, the presets
-  ``torchratslam.presets``);
-* the wheel holds every package and the shipped presets, and the README's quick start
-  runs from the wheel's contents alone, outside the checkout;
-* every folder with an ``__init__.py`` is listed in pyproject's ``packages``.
+* import names are folder paths: no package is remapped, and the torch-free half is a
+  distribution of its own (``graph/``, import name ``ratslam_graph``) without torch;
+* a user's own ``graph.py`` / ``configs.py`` in the working directory shadows nothing;
+* the wheels hold every package and the shipped presets (``configs/``, data, as
+  ``torchratslam/presets/``), and the README's quick start runs from the wheels' contents
+  alone, outside the checkout.
 """
 
 import shutil
@@ -23,28 +23,25 @@ except ModuleNotFoundError:  # Python 3.10
 
 ROOT = Path(__file__).resolve().parent.parent
 PYPROJECT = tomllib.loads((ROOT / "pyproject.toml").read_text())
-SETUPTOOLS = PYPROJECT["tool"]["setuptools"]
-# Source folder -> import name, as the build maps them.
-PACKAGE_DIRS = {src: name for name, src in SETUPTOOLS["package-dir"].items()}
-
-
-def _import_name(folder: Path) -> str:
-    """The import name of a package folder of the checkout (through package-dir)."""
-    rel = folder.relative_to(ROOT).parts
-    for cut in range(len(rel), 0, -1):
-        head = "/".join(rel[:cut])
-        if head in PACKAGE_DIRS:
-            return ".".join((PACKAGE_DIRS[head], *rel[cut:]))
-    raise AssertionError(f"{folder} is outside every package-dir root {PACKAGE_DIRS}")
+# Each distribution's source folder: what you import is where the file is.
+SOURCES = {"torchratslam": ROOT, "ratslam_graph": ROOT / "graph"}
 
 
 def _package_folders() -> list[Path]:
     return sorted(
         p.parent
-        for src in PACKAGE_DIRS
-        for p in (ROOT / src).rglob("__init__.py")
+        for name, src in SOURCES.items()
+        for p in (src / name).rglob("__init__.py")
         if "__pycache__" not in p.parts
     )
+
+
+def _import_name(folder: Path) -> str:
+    """The import name of a package folder: its path below the distribution's folder."""
+    for name, src in SOURCES.items():
+        if folder.is_relative_to(src / name):
+            return ".".join(folder.relative_to(src).parts)
+    raise AssertionError(f"{folder} is outside every distribution {SOURCES}")
 
 
 def _modules() -> list[str]:
@@ -61,19 +58,19 @@ def _modules() -> list[str]:
     return sorted(set(names))
 
 
-def test_every_package_folder_is_listed_in_pyproject():
-    listed = set(SETUPTOOLS["packages"])
-    found = {_import_name(f) for f in _package_folders()}
-    assert found - listed == set(), f"add these to [tool.setuptools] packages: {found - listed}"
-    assert listed - found == set(), f"listed packages without a folder: {listed - found}"
-    assert {"torchratslam.graph", "torchratslam.presets", "torchratslam.cli"} <= found
+def test_no_package_is_remapped():
+    for pyproject in (ROOT / "pyproject.toml", ROOT / "graph" / "pyproject.toml"):
+        setuptools = tomllib.loads(pyproject.read_text())["tool"]["setuptools"]
+        assert "package-dir" not in setuptools, pyproject
+    assert not (ROOT / "configs" / "__init__.py").exists(), "configs/ holds data, not code"
+    assert _import_name(ROOT / "graph" / "ratslam_graph" / "backends") == "ratslam_graph.backends"
+    assert "ratslam_graph.backends.alpha" in _modules()
 
 
-def test_the_checker_maps_folders_through_package_dir():
-    assert _import_name(ROOT / "graph" / "backends") == "torchratslam.graph.backends"
-    assert _import_name(ROOT / "configs") == "torchratslam.presets"
-    assert _import_name(ROOT / "torchratslam" / "maps") == "torchratslam.maps"
-    assert "torchratslam.graph.backends.alpha" in _modules()
+def test_the_graph_distribution_does_not_depend_on_torch():
+    graph = tomllib.loads((ROOT / "graph" / "pyproject.toml").read_text())["project"]
+    assert not any(d.startswith("torch") for d in graph["dependencies"])
+    assert any(d.startswith("ratslam-graph") for d in PYPROJECT["project"]["dependencies"])
 
 
 def test_a_users_graph_py_and_configs_py_shadow_nothing(tmp_path):
@@ -98,23 +95,25 @@ def test_a_users_graph_py_and_configs_py_shadow_nothing(tmp_path):
 def wheel(tmp_path_factory) -> Path:
     """Build the wheel offline from a copy of the sources (no build/ in the checkout)."""
     src = tmp_path_factory.mktemp("src")
-    for name in ("pyproject.toml", "README.md"):
+    for name in ("pyproject.toml", "setup.py", "MANIFEST.in", "README.md"):
         shutil.copy(ROOT / name, src / name)
-    ignore = shutil.ignore_patterns("__pycache__", "*.pyc")
-    for folder in PACKAGE_DIRS:
+    ignore = shutil.ignore_patterns("__pycache__", "*.pyc", "*.egg-info", "build")
+    for folder in ("torchratslam", "graph", "configs"):
         shutil.copytree(ROOT / folder, src / folder, ignore=ignore)
     out = tmp_path_factory.mktemp("wheel")
     cmd = [sys.executable, "-m", "pip", "wheel", "--no-deps", "--no-build-isolation"]
-    res = subprocess.run(
-        [*cmd, "--no-index", "-q", "-w", str(out), str(src)], capture_output=True, text=True
-    )
-    assert res.returncode == 0, res.stderr[-3000:]
+    for dist in (src, src / "graph"):
+        res = subprocess.run(
+            [*cmd, "--no-index", "-q", "-w", str(out), str(dist)], capture_output=True, text=True
+        )
+        assert res.returncode == 0, res.stderr[-3000:]
     (whl,) = out.glob("torchratslam-*.whl")
-    return whl
+    (graph,) = out.glob("ratslam_graph-*.whl")
+    return whl, graph
 
 
-def test_the_wheel_holds_every_package_and_the_presets(wheel):
-    names = set(zipfile.ZipFile(wheel).namelist())
+def test_the_wheels_hold_every_package_and_the_presets(wheel):
+    names = set(zipfile.ZipFile(wheel[0]).namelist()) | set(zipfile.ZipFile(wheel[1]).namelist())
     for folder in _package_folders():
         init = _import_name(folder).replace(".", "/") + "/__init__.py"
         assert init in names, f"{init} missing from the wheel"
@@ -128,12 +127,14 @@ def test_the_wheel_holds_every_package_and_the_presets(wheel):
 
 def test_the_quick_start_runs_from_the_wheel_outside_the_checkout(wheel, tmp_path):
     site = tmp_path / "site"
-    zipfile.ZipFile(wheel).extractall(site)
+    for whl in wheel:
+        zipfile.ZipFile(whl).extractall(site)
     work = tmp_path / "work"
     work.mkdir()
     code = """
 import torch
-import torchratslam, torchratslam.graph, torchratslam.presets
+import torchratslam, ratslam_graph
+from torchratslam.config import CONFIG_DIR
 from torchratslam import RatSLAM, load_config
 from torchratslam.readers.datasets import open_data
 
@@ -142,8 +143,8 @@ slam = RatSLAM(load_config("virtual_tour"))
 result = slam.run(open_data("sim:virtual_tour/session2"), max_frames=40, progress=False)
 assert result.templates > 0 and result.experiences > 0, result
 print(torchratslam.__file__)
-print(torchratslam.graph.__file__)
-print(torchratslam.presets.__file__)
+print(ratslam_graph.__file__)
+print(CONFIG_DIR / "virtual_tour.yaml")
 """
     env = {"PATH": "/usr/bin:/bin", "PYTHONPATH": str(site), "HOME": str(tmp_path)}
     out = subprocess.run(

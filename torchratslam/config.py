@@ -27,15 +27,20 @@ from typing import Any, ClassVar
 
 import yaml
 
-from torchratslam.graph.errors import ConfigError, InputError, unknown_name_message
-from torchratslam.graph.params import ExperienceMapParams, Params, param
+from ratslam_graph.errors import ConfigError, InputError, unknown_name_message
+from ratslam_graph.params import ExperienceMapParams, Params, param
 
 
 def _presets_dir() -> Path:
-    """The folder of the shipped presets (package data ``torchratslam.presets``)."""
-    import importlib.resources
+    """The folder of the shipped presets.
 
-    return Path(str(importlib.resources.files("torchratslam.presets")))
+    ``configs/`` in a source checkout (and an editable install); the wheel ships the same
+    files as data in ``torchratslam/presets/``.
+    """
+    installed = Path(__file__).resolve().parent / "presets"
+    if installed.is_dir():
+        return installed
+    return Path(__file__).resolve().parent.parent / "configs"
 
 
 CONFIG_DIR = _presets_dir()
@@ -450,7 +455,7 @@ def load_config(path: str | Path | None = None, **overrides: Any) -> RatSLAMConf
 
     Args:
         path: a YAML file (``.yaml``/``.yml``), an OpenRatSLAM ``.txt`` config, the name
-            of a shipped preset (``configs/`` in the repository, ``torchratslam.presets``
+            of a shipped preset (``configs/`` in the repository, ``torchratslam/presets/``
             when installed) without extension (e.g. ``"virtual_tour"``), or
             None for OpenRatSLAM's defaults.
         **overrides: flat keys that replace values from the file.

@@ -1,6 +1,6 @@
-"""Errors of torchratslam: the same hierarchy as ``torchratslam.graph.errors`` (one root class)."""
+"""Errors of torchratslam: the same hierarchy as ``ratslam_graph.errors`` (one root class)."""
 
-from torchratslam.graph.errors import (
+from ratslam_graph.errors import (
     ConfigError,
     GraphError,
     InputError,

@@ -3,7 +3,7 @@
 * :class:`Frame` -- what every reader and the simulator yield: one timestamped image
   with the odometry over the interval that ends at it.
 * :class:`ViewMatch` -- the local view's verdict on one frame.
-* :class:`~torchratslam.graph.messages.Action` -- the pose cells' decision for the experience map
+* :class:`~ratslam_graph.messages.Action` -- the pose cells' decision for the experience map
   (defined in the torch-free ``graph`` package, re-exported here).
 """
 
@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from torchratslam.graph.messages import Action, ActionKind
+from ratslam_graph.messages import Action, ActionKind
 
 __all__ = ["Action", "ActionKind", "Frame", "ViewMatch"]
 

@@ -15,13 +15,13 @@ registry            factory signature (what a user-registered module must accept
 ==================  ==================================================================
 
 Default names: local view ``"ratslam"``, pose cells ``"ratslam"``, experience map
-``"ratslam"`` (:class:`torchratslam.graph.experience_map.ExperienceMap`, registered here) and
+``"ratslam"`` (:class:`ratslam_graph.experience_map.ExperienceMap`, registered here) and
 odometry ``"given"`` (the reader's wheel odometry) or ``"visual"`` (intensity-profile
 visual odometry), both registered here.
 
 Per frame, in the reference's order: odometry source on the frame; local view on the
 image; pose cells on the template (``on_view_template``); pose cells on the odometry
-(``on_odometry``, returning the :class:`~torchratslam.graph.messages.Action`); experience map on the
+(``on_odometry``, returning the :class:`~ratslam_graph.messages.Action`); experience map on the
 odometry, then ``apply(action, ...)`` and ``iterate()`` (relaxation).
 
 The pipelined mode (``pipelined=True``) runs the reader + odometry + local view, the
@@ -56,8 +56,8 @@ import numpy as np
 import torch
 
 from torchratslam.config import RatSLAMConfig, VisualOdometryParams
-from torchratslam.graph.errors import InputError
-from torchratslam.graph.messages import Action, ActionKind
+from ratslam_graph.errors import InputError
+from ratslam_graph.messages import Action, ActionKind
 from torchratslam.messages import Frame, ViewMatch
 from torchratslam.protocols import FrameSource
 from torchratslam.readers.visual_odometry import GivenOdometry, VisualOdometry
@@ -74,7 +74,7 @@ QUEUE_SIZE = 10
 
 # ----------------------------------------------------------------------------- defaults
 def _experience_map_factory(params: Any) -> Any:
-    from torchratslam.graph.experience_map import ExperienceMap
+    from ratslam_graph.experience_map import ExperienceMap
 
     return ExperienceMap(params)
 

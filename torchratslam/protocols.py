@@ -9,7 +9,7 @@ The registries in :mod:`torchratslam.registry` are typed with these protocols an
 what they build with ``isinstance`` (the protocols are ``runtime_checkable``: the check
 is that the named methods and attributes exist), and the map-state code talks to the
 modules only through them. The torch-free ones (experience map, relaxation backend,
-:class:`Stateful`) live in :mod:`torchratslam.graph.protocols` and are re-exported here.
+:class:`Stateful`) live in :mod:`ratslam_graph.protocols` and are re-exported here.
 """
 
 from __future__ import annotations
@@ -19,8 +19,8 @@ from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
 
 import numpy as np
 
-from torchratslam.graph.messages import Action
-from torchratslam.graph.protocols import ExperienceMapModule, RelaxationBackend, Stateful
+from ratslam_graph.messages import Action
+from ratslam_graph.protocols import ExperienceMapModule, RelaxationBackend, Stateful
 from torchratslam.messages import Frame, ViewMatch
 
 if TYPE_CHECKING:  # annotations only: importing the protocols does not load torch

@@ -17,7 +17,7 @@ from __future__ import annotations
 from collections.abc import Callable, Iterator
 from typing import Any, Generic, TypeVar
 
-from torchratslam.graph.errors import ConfigError, unknown_name_message
+from ratslam_graph.errors import ConfigError, unknown_name_message
 from torchratslam.protocols import (
     ExperienceMapModule,
     LocalViewModule,

@@ -10,7 +10,7 @@ import shutil
 import cv2
 import numpy as np
 import pytest
-from torchratslam.graph.io import read_posegraph
+from ratslam_graph.io import read_posegraph
 
 from torchratslam.config import check_config_limits, load_config
 from torchratslam.errors import ConfigError, InputError, MapFormatError, RatSLAMError

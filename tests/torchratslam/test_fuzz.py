@@ -29,7 +29,7 @@ import pytest
 import yaml
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
-from torchratslam.graph.io import read_posegraph
+from ratslam_graph.io import read_posegraph
 
 from torchratslam.config import RatSLAMConfig, check_config_limits, load_config
 from torchratslam.errors import RatSLAMError

@@ -25,8 +25,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
-from torchratslam.graph.experience_map import ExperienceMap
-from torchratslam.graph.messages import Action, ActionKind
+from ratslam_graph.experience_map import ExperienceMap
+from ratslam_graph.messages import Action, ActionKind
 
 from torchratslam.config import load_config
 from torchratslam.messages import Frame

@@ -6,7 +6,7 @@ import math
 import numpy as np
 import pytest
 import torch
-from torchratslam.graph.messages import Action, ActionKind
+from ratslam_graph.messages import Action, ActionKind
 
 from torchratslam.config import RatSLAMConfig
 from torchratslam.errors import ConfigError, InputError
@@ -94,7 +94,7 @@ def _frames(n, seed=0):
 
 
 def _fake_slam(log, behaviour="openratslam", **kw):
-    from torchratslam.graph.experience_map import ExperienceMap
+    from ratslam_graph.experience_map import ExperienceMap
 
     class LoggingMap(ExperienceMap):
         def on_odometry(self, vtrans, vrot, dt):

@@ -6,8 +6,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import torch
-from torchratslam.graph.backends import AlphaBackend
-from torchratslam.graph.experience_map import ExperienceMap
+from ratslam_graph.backends import AlphaBackend
+from ratslam_graph.experience_map import ExperienceMap
 
 from torchratslam.config import RatSLAMConfig, load_config
 from torchratslam.errors import ConfigError, MapFormatError

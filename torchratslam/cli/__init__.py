@@ -10,7 +10,7 @@ Every command runs torch with one intra-op thread unless ``TORCHRATSLAM_THREADS`
 otherwise (RatSLAM's per-frame work is small; on a 2-core machine the default thread
 pool made runs several times slower). ``run --threads N`` overrides it for that command.
 
-Errors raised deliberately (:class:`~torchratslam.graph.errors.RatSLAMError`) and OS errors end the
+Errors raised deliberately (:class:`~ratslam_graph.errors.RatSLAMError`) and OS errors end the
 command with a one-line message and exit code 2; ``--debug`` shows the traceback.
 
 Global options work anywhere on the command line (before or after the subcommand):
@@ -33,7 +33,7 @@ import traceback
 from collections.abc import Sequence
 from typing import Any
 
-from torchratslam.graph.errors import ConfigError, RatSLAMError
+from ratslam_graph.errors import ConfigError, RatSLAMError
 
 EPILOG = """examples:
   torchratslam simulate virtual_tour --out data/vt --sessions

@@ -10,7 +10,7 @@ import numpy as np
 DESCRIPTION = """Relax one pose graph with several backends and print a table of time,
 final error and (with ground truth) ATE per backend.
 
-MAP is a g2o or TORO pose-graph file (read with torchratslam.graph.io.read_posegraph), or a saved
+MAP is a g2o or TORO pose-graph file (read with ratslam_graph.io.read_posegraph), or a saved
 RatSLAM state (a state directory, a run's OUT directory containing state/, or a
 reference-format map): its experience map is turned into a pose graph (link
 (d, heading, facing) -> dx = d cos(heading), dy = d sin(heading), dth = facing)."""

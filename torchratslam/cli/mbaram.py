@@ -11,7 +11,7 @@ from pathlib import Path
 from typing import Any
 
 from torchratslam.experiments.mbaram_tour import PRESETS
-from torchratslam.graph.errors import ConfigError
+from ratslam_graph.errors import ConfigError
 
 # The experiment is torchratslam.experiments.mbaram_tour; this module parses the
 # arguments and calls it.

@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 
 from torchratslam.config import load_config
-from torchratslam.graph.errors import GraphError
+from ratslam_graph.errors import GraphError
 
 
 def register(subparsers: Any) -> argparse.ArgumentParser:

@@ -146,7 +146,7 @@ def register(subparsers: Any) -> argparse.ArgumentParser:
 
 def parse_seeds(spec: str) -> list[int]:
     """``"0-9"`` or ``"0,3,5"`` (or both, comma-separated) -> the seeds."""
-    from torchratslam.graph.errors import ConfigError
+    from ratslam_graph.errors import ConfigError
 
     seeds: list[int] = []
     try:
@@ -165,7 +165,7 @@ def _seeds_main(args: argparse.Namespace, overrides: dict[str, str], merge: dict
     import sys
 
     from torchratslam.experiments.multisession_tour import seed_table, seed_table_markdown
-    from torchratslam.graph.io import atomic_write_text
+    from ratslam_graph.io import atomic_write_text
 
     seeds = parse_seeds(args.seeds)
     out = Path(args.out)
@@ -206,7 +206,7 @@ def _seeds_main(args: argparse.Namespace, overrides: dict[str, str], merge: dict
 
 def main(args: argparse.Namespace) -> int:
     from torchratslam.experiments.multisession_tour import report_markdown, run_experiment
-    from torchratslam.graph.errors import ConfigError
+    from ratslam_graph.errors import ConfigError
 
     backends = tuple(b.strip() for b in args.backends.split(",") if b.strip())
     overrides = {}

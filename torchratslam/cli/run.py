@@ -6,7 +6,7 @@ import argparse
 from pathlib import Path
 from typing import Any
 
-from torchratslam.graph.errors import ConfigError, InputError
+from ratslam_graph.errors import ConfigError, InputError
 from torchratslam.readers.limits import MAX_SPEED, MAX_TURN_RATE
 
 DESCRIPTION = """Run RatSLAM on a dataset.

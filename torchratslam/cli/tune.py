@@ -130,7 +130,7 @@ def register(subparsers: Any) -> argparse.ArgumentParser:
 
 
 def _pairs(items: list[str], flag: str) -> dict[str, str]:
-    from torchratslam.graph.errors import ConfigError
+    from ratslam_graph.errors import ConfigError
 
     out: dict[str, str] = {}
     for item in items:
@@ -142,7 +142,7 @@ def _pairs(items: list[str], flag: str) -> dict[str, str]:
 
 
 def main(args: argparse.Namespace) -> int:
-    from torchratslam.graph.errors import InputError
+    from ratslam_graph.errors import InputError
     from torchratslam.sweeps import tune
 
     try:

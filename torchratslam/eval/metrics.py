@@ -2,7 +2,7 @@
 
 * :func:`align_se2`, :func:`apply_se2`, :func:`ate_rmse`, :func:`dead_reckoning` --
   rigid SE(2) alignment (Umeyama's closed form in 2D), absolute trajectory error and
-  odometry integration; they live in :mod:`torchratslam.graph.geometry` and are
+  odometry integration; they live in :mod:`ratslam_graph.geometry` and are
   re-exported here.
 * :func:`interpolate_groundtruth` -- ground-truth poses at given times.
 * :func:`icp` / :func:`icp_rmse` -- the project's ICP figure (not the papers'):
@@ -21,8 +21,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from torchratslam.graph.errors import InputError
-from torchratslam.graph.geometry import (
+from ratslam_graph.errors import InputError
+from ratslam_graph.geometry import (
     Se2Alignment,
     align_se2,
     apply_se2,

@@ -28,7 +28,7 @@ from typing import Any
 
 import numpy as np
 
-from torchratslam.graph.errors import InputError
+from ratslam_graph.errors import InputError
 
 __all__ = [
     "ScaleRecorder",

@@ -36,9 +36,9 @@ from typing import Any
 
 import numpy as np
 
-from torchratslam.graph.errors import InputError, MapFormatError
-from torchratslam.graph.geometry import wrap_angle
-from torchratslam.graph.messages import ActionKind
+from ratslam_graph.errors import InputError, MapFormatError
+from ratslam_graph.geometry import wrap_angle
+from ratslam_graph.messages import ActionKind
 
 __all__ = [
     "FramePoseRecorder",
@@ -192,7 +192,7 @@ def frame_poses(
     current (``reset``): position delta 0, heading the experience's plus the view's
     relative angle (``relative_rad``; 0 for a created experience). Each later frame
     turns by ``vrot*dt`` then steps ``vtrans*dt`` along the new heading, exactly as
-    :meth:`torchratslam.graph.experience_map.ExperienceMap.on_odometry`. The delta is
+    :meth:`ratslam_graph.experience_map.ExperienceMap.on_odometry`. The delta is
     expressed in the experience's frame and composed with the experience's final pose,
     so loop-closure corrections carry over to the frames around it.
 

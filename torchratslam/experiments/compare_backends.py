@@ -11,8 +11,8 @@ from typing import Any
 
 import numpy as np
 
-from torchratslam.graph.atomic import atomic_write_text
-from torchratslam.graph.errors import InputError
+from ratslam_graph.atomic import atomic_write_text
+from ratslam_graph.errors import InputError
 
 __all__ = [
     "format_table",
@@ -25,7 +25,7 @@ __all__ = [
 
 def posegraph_from_state(state: Any) -> Any:
     """The pose graph of a saved map's experience map (a ``MapState``)."""
-    from torchratslam.graph.posegraph import PoseGraph
+    from ratslam_graph.posegraph import PoseGraph
 
     poses = np.asarray(state.exp_pose, dtype=np.float64).reshape(-1, 3)
     src = np.asarray(state.link_from, dtype=np.int64)
@@ -44,7 +44,7 @@ def load_posegraph(path: str | Path) -> Any:
     if not p.exists():
         raise InputError(f"--map {str(path)!r}: not found; give a .g2o/TORO file or a saved state")
     if p.is_file() and p.suffix.lower() in (".g2o", ".graph", ".txt", ".toro"):
-        from torchratslam.graph.io import read_posegraph
+        from ratslam_graph.io import read_posegraph
 
         return read_posegraph(p)
     from torchratslam.maps.io import load_state
@@ -73,7 +73,7 @@ def _groundtruth(path: str | Path | None, n: int) -> np.ndarray | None:
     """True node poses from ``path`` (None without one), checked against ``n`` nodes."""
     if not path:
         return None
-    from torchratslam.graph.io import read_poses
+    from ratslam_graph.io import read_poses
 
     gt = read_poses(path)
     if gt.shape[0] != n:
@@ -102,7 +102,7 @@ def run_comparison(
     Raises:
         InputError: no backends, a missing map, mismatched ground truth, passes < 1.
     """
-    from torchratslam.graph.compare import compare_backends
+    from ratslam_graph.compare import compare_backends
 
     if not backends:
         raise InputError("--backends is empty; e.g. --backends alpha,gtsam,isam2")

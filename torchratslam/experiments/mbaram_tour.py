@@ -14,8 +14,8 @@ from typing import Any
 
 import numpy as np
 
-from torchratslam.graph.atomic import atomic_write_text, atomic_write_with
-from torchratslam.graph.errors import ConfigError, InputError
+from ratslam_graph.atomic import atomic_write_text, atomic_write_with
+from ratslam_graph.errors import ConfigError, InputError
 from torchratslam.messages import Frame
 
 __all__ = [

@@ -24,8 +24,8 @@ import numpy as np
 
 from torchratslam.config import RatSLAMConfig, load_config
 from torchratslam.eval.icp import PAPER_ICP_MSE_M2
-from torchratslam.graph.atomic import atomic_write_text
-from torchratslam.graph.errors import InputError
+from ratslam_graph.atomic import atomic_write_text
+from ratslam_graph.errors import InputError
 from torchratslam.maps.state import MapState
 from torchratslam.multisession.session import MultiSessionRatSLAM
 from torchratslam.pipeline import RatSLAM
@@ -92,7 +92,7 @@ def _map_metrics(state: MapState, gt: np.ndarray | None) -> dict[str, Any]:
 
 
 def _posegraph(state: MapState, config: RatSLAMConfig) -> Any:
-    from torchratslam.graph.experience_map import ExperienceMap
+    from ratslam_graph.experience_map import ExperienceMap
     from torchratslam.maps.state import experience_map_state
 
     em = ExperienceMap(config.experience_map)
@@ -101,7 +101,7 @@ def _posegraph(state: MapState, config: RatSLAMConfig) -> Any:
 
 
 def _graph_error(state: MapState, config: RatSLAMConfig) -> float:
-    from torchratslam.graph.backends import GraphErrorEvaluator
+    from ratslam_graph.backends import GraphErrorEvaluator
 
     pg = _posegraph(state, config)
     return float(GraphErrorEvaluator(pg)(pg.poses)) if pg.num_edges else 0.0
@@ -357,7 +357,7 @@ def _relax_rows(
 ) -> dict[str, Any] | None:
     """Each backend relaxing ``state``'s graph once (None when it has no links)."""
     from torchratslam.eval.metrics import interpolate_groundtruth
-    from torchratslam.graph.compare import compare_backends
+    from ratslam_graph.compare import compare_backends
 
     pg = _posegraph(state, config)
     if pg.num_edges == 0:
@@ -637,7 +637,7 @@ def _tour_setup(
 
 
 def _write_json(path: Path, obj: Any) -> None:
-    """Atomic JSON write (the one atomic writer, :mod:`torchratslam.graph.atomic`)."""
+    """Atomic JSON write (the one atomic writer, :mod:`ratslam_graph.atomic`)."""
     text = json.dumps(obj, indent=1, default=lambda v: v.item() if hasattr(v, "item") else str(v))
     atomic_write_text(path, text)
 
@@ -794,7 +794,7 @@ def place_counts(
         ``experiences``, ``repeats``, ``places``, ``radius_m``, and with
         ``session_frames``: ``unseen``, ``places_seen`` (places the sessions see).
     """
-    from torchratslam.graph.geometry import wrap_angle
+    from ratslam_graph.geometry import wrap_angle
 
     n = state.n_experiences
     out: dict[str, Any] = {"experiences": n, "repeats": 0, "places": n, "radius_m": 0.0}

@@ -25,8 +25,8 @@ from typing import Any
 
 import numpy as np
 
-from torchratslam.graph.atomic import Manifest, atomic_write_text
-from torchratslam.graph.errors import InputError, RatSLAMError
+from ratslam_graph.atomic import Manifest, atomic_write_text
+from ratslam_graph.errors import InputError, RatSLAMError
 from torchratslam.protocols import GroundTruthSource
 from torchratslam.readers.limits import MAX_SPEED, MAX_TURN_RATE
 
@@ -673,7 +673,7 @@ def _start(
     import torch
 
     from torchratslam.config import check_config_limits
-    from torchratslam.graph.atomic import LOCK_NAME, DirectoryLock, make_dirs
+    from ratslam_graph.atomic import LOCK_NAME, DirectoryLock, make_dirs
 
     torch.set_num_threads(threads)
     if opts["pipelined"] and (checkpoint_every or resume):

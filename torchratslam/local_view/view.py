@@ -58,7 +58,7 @@ import torch.nn.functional as F
 from torch import nn
 
 from torchratslam.config import LocalViewParams
-from torchratslam.graph.errors import ConfigError, InputError, MapFormatError
+from ratslam_graph.errors import ConfigError, InputError, MapFormatError
 from torchratslam.messages import Frame, ViewMatch
 from torchratslam.registry import LOCAL_VIEWS
 

@@ -1,6 +1,6 @@
 """Kept for imports written before the writer moved: the project's one atomic writer is
-:mod:`torchratslam.graph.atomic`."""
+:mod:`ratslam_graph.atomic`."""
 
-from torchratslam.graph.atomic import write_directory_atomically
+from ratslam_graph.atomic import write_directory_atomically
 
 __all__ = ["write_directory_atomically"]

@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from torchratslam.graph.errors import InputError, MapFormatError
+from ratslam_graph.errors import InputError, MapFormatError
 from torchratslam.maps import state as _state
 from torchratslam.maps.reference_format import (
     EXP_EXTRAS,

@@ -42,8 +42,8 @@ from typing import Any
 
 import numpy as np
 
-from torchratslam.graph.errors import GraphError
-from torchratslam.graph.geometry import pc_distance, wrap_angle
+from ratslam_graph.errors import GraphError
+from ratslam_graph.geometry import pc_distance, wrap_angle
 from torchratslam.maps.state import (
     EM_ACCUM,
     INT_FIELDS,

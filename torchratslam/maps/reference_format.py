@@ -53,8 +53,8 @@ from typing import Any, BinaryIO
 
 import numpy as np
 
-from torchratslam.graph.atomic import write_directory_atomically
-from torchratslam.graph.errors import InputError, MapFormatError
+from ratslam_graph.atomic import write_directory_atomically
+from ratslam_graph.errors import InputError, MapFormatError
 from torchratslam.maps.state import MISSING_KEY, MapState
 
 __all__ = [

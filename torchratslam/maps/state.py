@@ -45,8 +45,8 @@ from typing import Any, cast
 
 import numpy as np
 
-from torchratslam.graph.atomic import recover_directory, write_directory_atomically
-from torchratslam.graph.errors import InputError, MapFormatError
+from ratslam_graph.atomic import recover_directory, write_directory_atomically
+from ratslam_graph.errors import InputError, MapFormatError
 
 __all__ = [
     "FORMAT_NAME",
@@ -399,7 +399,7 @@ def save_map(
 
     The files are written into a temporary directory beside the target, synced, then
     swapped with the old one in one atomic step where the platform allows it
-    (:func:`torchratslam.graph.atomic.write_directory_atomically`): at every instant
+    (:func:`ratslam_graph.atomic.write_directory_atomically`): at every instant
     the target holds a complete map, the old or the new. An existing saved map at the
     target is replaced; an existing directory holding anything else is refused.
 
@@ -740,7 +740,7 @@ def _collect(prefix: str, state: MapState) -> dict[str, Any]:
 
 
 def experience_map_state(state: MapState) -> dict[str, Any]:
-    """The ``torchratslam.graph.experience_map.ExperienceMap.set_state`` dictionary of ``state``."""
+    """The ``ratslam_graph.experience_map.ExperienceMap.set_state`` dictionary of ``state``."""
     em = _collect("em", state)
     accum = np.asarray(state.extra.get(EM_ACCUM, np.zeros(4)), np.float64)
     n_l = state.n_links
@@ -769,7 +769,7 @@ def experience_map_state(state: MapState) -> dict[str, Any]:
         }
     )
     em.setdefault("relative_rad", 0.0)
-    from torchratslam.graph.experience_map import STATE_FORMAT, STATE_VERSION
+    from ratslam_graph.experience_map import STATE_FORMAT, STATE_VERSION
 
     em.setdefault("format", STATE_FORMAT)  # maps imported from the reference format
     em.setdefault("version", STATE_VERSION)
@@ -799,7 +799,7 @@ def apply_experience_map(state: MapState, config: Any, *, passes: int | None = N
     """Relax ``state``'s experience map once with the configured backend
     (``exp_backend``, ``exp_loops`` passes unless ``passes`` is given); returns a copy
     with the new poses."""
-    from torchratslam.graph.experience_map import ExperienceMap
+    from ratslam_graph.experience_map import ExperienceMap
 
     params = config.experience_map
     if passes is not None:

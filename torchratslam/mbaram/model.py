@@ -57,9 +57,9 @@ import networkx as nx
 import numpy as np
 import torch
 
-from torchratslam.graph.errors import ConfigError, InputError, MapFormatError
-from torchratslam.graph.geometry import odometry_step, wrap_angle
-from torchratslam.graph.params import Params, param
+from ratslam_graph.errors import ConfigError, InputError, MapFormatError
+from ratslam_graph.geometry import odometry_step, wrap_angle
+from ratslam_graph.params import Params, param
 from torchratslam.messages import Frame
 from torchratslam.registry import RANGE_MAPPERS
 

@@ -32,7 +32,7 @@ import numpy as np
 import torch
 
 from torchratslam.config import RatSLAMConfig
-from torchratslam.graph.errors import ConfigError
+from ratslam_graph.errors import ConfigError
 from torchratslam.maps.merge import fuse_templates, merge_maps, pick_experience
 from torchratslam.maps.state import (
     MapState,

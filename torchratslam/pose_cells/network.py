@@ -66,9 +66,9 @@ import torch
 from torch import nn
 
 from torchratslam.config import PoseCellParams
-from torchratslam.graph.errors import ConfigError, InputError, MapFormatError
-from torchratslam.graph.geometry import pc_distance
-from torchratslam.graph.messages import Action, ActionKind
+from ratslam_graph.errors import ConfigError, InputError, MapFormatError
+from ratslam_graph.geometry import pc_distance
+from ratslam_graph.messages import Action, ActionKind
 from torchratslam.messages import ViewMatch
 from torchratslam.registry import POSE_CELLS
 
@@ -1355,7 +1355,7 @@ class PoseCells:
     It owns one :class:`PoseCellNetwork`, remembers the pose cell where each visual
     template and each experience was learnt, injects energy for familiar views and,
     after each odometry step, decides the experience-map
-    :class:`~torchratslam.graph.messages.Action`.
+    :class:`~ratslam_graph.messages.Action`.
 
     Call :meth:`on_view_template` and :meth:`on_odometry` once per frame; as in
     OpenRatSLAM an action is only decided once both have been received since the last
@@ -1482,7 +1482,7 @@ class PoseCells:
             dt: interval (s).
 
         Returns:
-            The :class:`~torchratslam.graph.messages.Action` for the experience map.
+            The :class:`~ratslam_graph.messages.Action` for the experience map.
         """
         self._best = self.network.step_one(float(vtrans), float(vrot), float(dt))
         self._odo_update = True

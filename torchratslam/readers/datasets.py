@@ -24,7 +24,7 @@ visual odometry). Frames are read lazily, one at a time.
 Errors (missing files, unreadable images, mismatched counts, non-monotonic or NaN
 timestamps and values, odometry faster than ``max_speed`` / ``max_turn_rate``, ground
 truth whose times do not overlap the frames' times: a different time base) raise
-:class:`~torchratslam.graph.errors.InputError` naming the file and the row.
+:class:`~ratslam_graph.errors.InputError` naming the file and the row.
 """
 
 from __future__ import annotations
@@ -41,8 +41,8 @@ from typing import Any
 import cv2
 import numpy as np
 
-from torchratslam.graph.errors import InputError
-from torchratslam.graph.geometry import wrap_angle
+from ratslam_graph.errors import InputError
+from ratslam_graph.geometry import wrap_angle
 from torchratslam.messages import Frame
 from torchratslam.readers.limits import MAX_SPEED, MAX_TURN_RATE
 

@@ -30,7 +30,7 @@ import cv2
 import numpy as np
 import yaml
 
-from torchratslam.graph.errors import InputError
+from ratslam_graph.errors import InputError
 from torchratslam.sim.tours import TOURS, Session, get_tour
 
 __all__ = ["FORMAT_VERSION", "open_sim", "parse_sim_spec", "write_dataset"]
@@ -54,7 +54,7 @@ def parse_sim_spec(spec: str) -> tuple[str, str | None, dict]:
         body, query = body.split("?", 1)
     name, _, session = body.partition("/")
     if name not in TOURS:
-        from torchratslam.graph.errors import unknown_name_message
+        from ratslam_graph.errors import unknown_name_message
 
         raise InputError(unknown_name_message("simulator tour", name, TOURS) + f" in {spec!r}")
     options = {}
@@ -119,7 +119,7 @@ def write_dataset(
     Raises:
         InputError: ``out_dir`` exists, is not empty, and ``overwrite`` is False.
     """
-    from torchratslam.graph.atomic import Manifest, make_dirs, swap_in, unique_name
+    from ratslam_graph.atomic import Manifest, make_dirs, swap_in, unique_name
 
     out = Path(out_dir)
     if out.exists() and not out.is_dir():

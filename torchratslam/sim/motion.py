@@ -4,7 +4,7 @@ Ground truth and odometry are consistent by construction: the heading at frame `
 is the direction of travel from frame ``k-1`` to ``k`` (frame 0 takes frame 1's), and
 the odometry of the interval ending at frame ``k`` integrates back exactly with the
 rotate-then-translate rule used by OpenRatSLAM's experience map
-(:func:`torchratslam.graph.geometry.dead_reckoning`)::
+(:func:`ratslam_graph.geometry.dead_reckoning`)::
 
     th_k = th_{k-1} + vrot_k * dt_k
     x_k  = x_{k-1}  + vtrans_k * dt_k * cos(th_k)
@@ -22,8 +22,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from torchratslam.graph.errors import InputError
-from torchratslam.graph.geometry import wrap_angle
+from ratslam_graph.errors import InputError
+from ratslam_graph.geometry import wrap_angle
 
 __all__ = ["OdometryNoise", "Route", "odometry_from_poses"]
 

@@ -49,8 +49,8 @@ from typing import Any
 
 import numpy as np
 
-from torchratslam.graph.errors import InputError, unknown_name_message
-from torchratslam.graph.geometry import dead_reckoning, wrap_angle
+from ratslam_graph.errors import InputError, unknown_name_message
+from ratslam_graph.geometry import dead_reckoning, wrap_angle
 from torchratslam.messages import Frame
 from torchratslam.sim.laser import Laser, scan
 from torchratslam.sim.motion import (

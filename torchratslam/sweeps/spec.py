@@ -38,7 +38,7 @@ from typing import Any
 import yaml
 
 from torchratslam.config import RatSLAMConfig, load_config
-from torchratslam.graph.errors import ConfigError, InputError
+from ratslam_graph.errors import ConfigError, InputError
 
 __all__ = ["Dataset", "RunSpec", "SweepSpec", "expand", "load_sweep", "parse_values"]
 
@@ -273,7 +273,7 @@ def _validate(spec: SweepSpec) -> None:
     owner = RatSLAMConfig.key_owner()
     for key in [*spec.fixed, *spec.parameters]:
         if key not in owner:
-            from torchratslam.graph.errors import unknown_name_message
+            from ratslam_graph.errors import unknown_name_message
 
             raise ConfigError(f"{spec.source}: " + unknown_name_message("parameter", key, owner))
     base = load_config(spec.base, **spec.fixed)

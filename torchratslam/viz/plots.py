@@ -30,7 +30,7 @@ __all__ = ["draw_icp_overlay", "plot_map", "plot_pose_cells", "save_figure"]
 def save_figure(fig: Any, path: str | Path, dpi: int = 110, *, tight: bool = True) -> Path:
     """Save a matplotlib figure atomically (temp file + rename) and close it
     (``tight``: ``bbox_inches="tight"``)."""
-    from torchratslam.graph.atomic import atomic_write_with
+    from ratslam_graph.atomic import atomic_write_with
 
     path = Path(path)
     fmt = (path.suffix or ".png").lstrip(".")

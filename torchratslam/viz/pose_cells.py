@@ -23,7 +23,7 @@ if "MPLBACKEND" not in os.environ:
 import matplotlib.pyplot as plt
 import numpy as np
 
-from torchratslam.graph.errors import InputError
+from ratslam_graph.errors import InputError
 
 __all__ = ["plot_activity", "plot_packet_path", "projections", "split_at_wraps"]
 
@@ -143,7 +143,7 @@ def plot_activity(
     fig.tight_layout()
     if path is None:
         return fig
-    from torchratslam.graph.atomic import atomic_write_with
+    from ratslam_graph.atomic import atomic_write_with
 
     out = Path(path)
     fmt = (out.suffix or ".png").lstrip(".")

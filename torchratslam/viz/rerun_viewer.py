@@ -45,7 +45,7 @@ from typing import Any
 
 import numpy as np
 
-from torchratslam.graph.errors import ConfigError
+from ratslam_graph.errors import ConfigError
 
 __all__ = ["ENTITIES", "RerunObserver", "import_rerun"]
 

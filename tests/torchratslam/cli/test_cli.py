@@ -82,7 +82,7 @@ def test_run_writes_every_output(run_out):
 
 
 def test_compare_backends_on_a_saved_state_and_a_g2o_file(run_out, tmp_path, capsys):
-    pytest.importorskip("torchratslam.graph.compare")
+    pytest.importorskip("ratslam_graph.compare")
     _, out, _ = run_out
     js = tmp_path / "cmp.json"
     argv = ["compare-backends", "--json", str(js)]
@@ -93,7 +93,7 @@ def test_compare_backends_on_a_saved_state_and_a_g2o_file(run_out, tmp_path, cap
     printed = capsys.readouterr().out
     assert "| alpha |" in printed and "| gtsam |" in printed
 
-    from torchratslam.graph.io import write_g2o
+    from ratslam_graph.io import write_g2o
 
     from torchratslam.experiments.compare_backends import load_posegraph
 

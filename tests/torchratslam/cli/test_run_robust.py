@@ -219,7 +219,7 @@ def test_a_second_run_on_one_out_stops_at_once_naming_the_first(setup, tmp_path,
     code = textwrap.dedent(
         f"""
         import sys
-        from torchratslam.graph.atomic import DirectoryLock
+        from ratslam_graph.atomic import DirectoryLock
         lock = DirectoryLock({str(out)!r}, "torchratslam run --out X").acquire()
         print("locked", flush=True)
         sys.stdin.read()

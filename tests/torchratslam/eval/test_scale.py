@@ -6,7 +6,7 @@ import json
 
 import numpy as np
 import pytest
-from torchratslam.graph.errors import InputError
+from ratslam_graph.errors import InputError
 
 from torchratslam.eval.scale import format_scale_table, read_openratslam_trace, scale_report
 

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from torchratslam.graph.errors import InputError, MapFormatError
+from ratslam_graph.errors import InputError, MapFormatError
 
 from torchratslam.cli import main
 from torchratslam.config import load_config

@@ -6,12 +6,12 @@ import math
 
 import numpy as np
 import pytest
-from torchratslam.graph.backends import make_backend
-from torchratslam.graph.backends.alpha import AlphaBackend
-from torchratslam.graph.backends.alpha_local import AlphaLocalBackend
-from torchratslam.graph.errors import ConfigError
-from torchratslam.graph.geometry import between, compose, wrap_angle
-from torchratslam.graph.posegraph import PoseGraph
+from ratslam_graph.backends import make_backend
+from ratslam_graph.backends.alpha import AlphaBackend
+from ratslam_graph.backends.alpha_local import AlphaLocalBackend
+from ratslam_graph.errors import ConfigError
+from ratslam_graph.geometry import between, compose, wrap_angle
+from ratslam_graph.posegraph import PoseGraph
 
 
 def _chain(rng, n, noise=0.0):

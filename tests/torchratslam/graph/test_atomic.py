@@ -9,8 +9,8 @@ import sys
 import textwrap
 
 import pytest
-from torchratslam.graph import atomic
-from torchratslam.graph.atomic import (
+from ratslam_graph import atomic
+from ratslam_graph.atomic import (
     DirectoryLock,
     Manifest,
     atomic_write_text,
@@ -106,7 +106,7 @@ def test_a_second_writer_stops_at_once_naming_the_first(tmp_path):
     code = textwrap.dedent(
         f"""
         import sys, time
-        from torchratslam.graph.atomic import DirectoryLock
+        from ratslam_graph.atomic import DirectoryLock
         lock = DirectoryLock({str(tmp_path)!r}, "torchratslam run").acquire()
         print("locked", flush=True)
         sys.stdin.read()

@@ -5,17 +5,17 @@ import math
 import gtsam
 import numpy as np
 import pytest
-from torchratslam.graph.backends import GraphErrorEvaluator, make_backend
-from torchratslam.graph.backends import alpha as alpha_module
-from torchratslam.graph.backends.alpha import (
+from ratslam_graph.backends import GraphErrorEvaluator, make_backend
+from ratslam_graph.backends import alpha as alpha_module
+from ratslam_graph.backends.alpha import (
     AlphaBackend,
     EdgeColouring,
     dependency_levels,
     reference_order,
 )
-from torchratslam.graph.compare import compare_backends, format_table
-from torchratslam.graph.errors import ConfigError, GraphError, InputError
-from torchratslam.graph.geometry import (
+from ratslam_graph.compare import compare_backends, format_table
+from ratslam_graph.errors import ConfigError, GraphError, InputError
+from ratslam_graph.geometry import (
     align_se2,
     apply_se2,
     ate_rmse,
@@ -23,8 +23,8 @@ from torchratslam.graph.geometry import (
     compose,
     wrap_angle,
 )
-from torchratslam.graph.io import example_file, read_posegraph
-from torchratslam.graph.posegraph import PoseGraph
+from ratslam_graph.io import example_file, read_posegraph
+from ratslam_graph.posegraph import PoseGraph
 
 W100_ALPHA_FIXED_POINT = 1.077  # issue 4: compiled reference-order loop on w100
 W100_LM = 0.569
@@ -282,7 +282,7 @@ def test_alpha_early_stop_only_at_a_fixed_point(kernel, correction):
 
 
 def _lm_error_direct(pg):
-    """LM straight from gtsam, built here independently of torchratslam.graph.backends."""
+    """LM straight from gtsam, built here independently of ratslam_graph.backends."""
     g = gtsam.NonlinearFactorGraph()
     for (a, b), m, info in zip(pg.edges.tolist(), pg.measurements, pg.information):
         g.add(
@@ -438,7 +438,7 @@ def test_align_se2_recovers_a_rigid_motion():
 
 def test_compare_backends_reports_time_error_and_ate(city):
     pg = city.subgraph(300)
-    from torchratslam.graph.io import read_poses
+    from ratslam_graph.io import read_poses
 
     gt = read_poses(example_file("ISAM2_GT_city10000.txt"))[:300]
     rows = compare_backends(pg, ("alpha", "gtsam", "isam2"), gt, passes=50)

@@ -14,10 +14,10 @@ import math
 import networkx as nx
 import numpy as np
 import pytest
-from torchratslam.graph.errors import GraphError, InputError, MapFormatError
-from torchratslam.graph.experience_map import ExperienceMap
-from torchratslam.graph.messages import Action, ActionKind
-from torchratslam.graph.params import ExperienceMapParams
+from ratslam_graph.errors import GraphError, InputError, MapFormatError
+from ratslam_graph.experience_map import ExperienceMap
+from ratslam_graph.messages import Action, ActionKind
+from ratslam_graph.params import ExperienceMapParams
 
 PI = math.pi
 
@@ -469,9 +469,9 @@ def test_deterministic():
 
 
 def _backends_or_skip():
-    backends = pytest.importorskip("torchratslam.graph.backends")
+    backends = pytest.importorskip("ratslam_graph.backends")
     if not hasattr(backends, "make_backend"):
-        pytest.skip("torchratslam.graph.backends.make_backend is not there yet")
+        pytest.skip("ratslam_graph.backends.make_backend is not there yet")
     return backends
 
 
@@ -563,7 +563,7 @@ def brute_force_sweep(poses: np.ndarray, src, dst, link, passes: int, c: float) 
 
 @pytest.mark.parametrize("passes", [1, 7, 400])
 def test_compiled_sweep_is_the_brute_force_loop_bit_for_bit(passes):
-    from torchratslam.graph.backends.alpha import reference_order, sweep_openratslam
+    from ratslam_graph.backends.alpha import reference_order, sweep_openratslam
 
     rng = np.random.default_rng(passes)
     n = 60
@@ -698,7 +698,7 @@ def test_over_relaxation_reaches_the_same_map_in_far_fewer_passes():
     over-relaxation): on a long loop with a closure error it settles in a small fraction
     of the passes, at a map as accurate as the one 0.5 settles at (the two differ by a few
     centimetres: the sequential rule's fixed point depends on the step)."""
-    from torchratslam.graph.backends.alpha import reference_order, sweep_openratslam
+    from ratslam_graph.backends.alpha import reference_order, sweep_openratslam
 
     rng = np.random.default_rng(12)
     n = 300
@@ -729,7 +729,7 @@ def test_over_relaxation_reaches_the_same_map_in_far_fewer_passes():
         sweep_openratslam(p, s, t, lk, passes, c)
         return p
 
-    from torchratslam.graph.geometry import align_se2
+    from ratslam_graph.geometry import align_se2
 
     def shape_gap(a: np.ndarray, b: np.ndarray) -> float:
         """Largest distance once ``a`` is rigidly aligned onto ``b`` (the map's shape)."""

@@ -10,9 +10,9 @@ import math
 
 import numpy as np
 import pytest
-from torchratslam.graph.errors import GraphError, InputError
-from torchratslam.graph.experience_map import ExperienceMap
-from torchratslam.graph.features import (
+from ratslam_graph.errors import GraphError, InputError
+from ratslam_graph.experience_map import ExperienceMap
+from ratslam_graph.features import (
     average_transition,
     experience_activity,
     link_confidence,
@@ -20,9 +20,9 @@ from torchratslam.graph.features import (
     rotate_link_components,
     temporal_map,
 )
-from torchratslam.graph.geometry import inverse, signed_delta, wrap_angle
-from torchratslam.graph.messages import Action, ActionKind
-from torchratslam.graph.params import ExperienceMapParams
+from ratslam_graph.geometry import inverse, signed_delta, wrap_angle
+from ratslam_graph.messages import Action, ActionKind
+from ratslam_graph.params import ExperienceMapParams
 
 PI = math.pi
 RNG = np.random.default_rng(1234)

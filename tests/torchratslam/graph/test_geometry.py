@@ -12,8 +12,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
-from torchratslam.graph.errors import InputError
-from torchratslam.graph.geometry import (
+from ratslam_graph.errors import InputError
+from ratslam_graph.geometry import (
     align_se2,
     apply_se2,
     ate_rmse,
@@ -250,12 +250,12 @@ def test_angles_are_wrapped_only_by_the_geometry_module():
         for m in [WRAP_IDIOMS.search(f.read_text())]
         if m
     }
-    assert not offenders, f"wrap angles with torchratslam.graph.geometry.wrap_angle: {offenders}"
+    assert not offenders, f"wrap angles with ratslam_graph.geometry.wrap_angle: {offenders}"
     assert WRAP_IDIOMS.search("th = (a + np.pi) % (2 * np.pi) - np.pi")
 
 
 def test_the_old_homes_re_export_the_one_implementation():
-    from torchratslam.graph import geometry
+    from ratslam_graph import geometry
 
     from torchratslam import eval as ev
     from torchratslam.maps import merge

@@ -3,9 +3,9 @@
 import gtsam
 import numpy as np
 import pytest
-from torchratslam.graph.errors import InputError, MapFormatError
-from torchratslam.graph.geometry import between, compose, wrap_angle
-from torchratslam.graph.io import (
+from ratslam_graph.errors import InputError, MapFormatError
+from ratslam_graph.geometry import between, compose, wrap_angle
+from ratslam_graph.io import (
     CITY_SIGMAS,
     example_file,
     read_posegraph,
@@ -13,7 +13,7 @@ from torchratslam.graph.io import (
     write_g2o,
     write_toro,
 )
-from torchratslam.graph.posegraph import PoseGraph, compose_odometry
+from ratslam_graph.posegraph import PoseGraph, compose_odometry
 
 
 def _gtsam_reference(path):

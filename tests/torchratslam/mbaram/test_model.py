@@ -12,7 +12,7 @@ import pytest
 import torch
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from torchratslam.graph.errors import ConfigError, InputError, MapFormatError
+from ratslam_graph.errors import ConfigError, InputError, MapFormatError
 
 from torchratslam.mbaram.model import (
     LASER_CHANNELS,

@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 import torch
-from torchratslam.graph.errors import ConfigError
+from ratslam_graph.errors import ConfigError
 
 from torchratslam.mbaram.model import (
     LASER_CHANNELS,

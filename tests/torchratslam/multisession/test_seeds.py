@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import torch
-from torchratslam.graph.errors import ConfigError
+from ratslam_graph.errors import ConfigError
 
 from torchratslam.config import load_config
 from torchratslam.experiments.multisession_tour import (
@@ -248,7 +248,7 @@ def test_tour_spec_options_reach_the_simulator():
     """``--tour sim:NAME?key=value`` passes the simulator's options to every seed's tour
     (and records them); a session, a seed in the spec or an unknown option is refused
     with one line naming it."""
-    from torchratslam.graph.errors import InputError
+    from ratslam_graph.errors import InputError
 
     from torchratslam.experiments.multisession_tour import parse_tour_spec
 

@@ -9,8 +9,8 @@ import math
 import cv2
 import numpy as np
 import pytest
-from torchratslam.graph.errors import InputError
-from torchratslam.graph.geometry import dead_reckoning
+from ratslam_graph.errors import InputError
+from ratslam_graph.geometry import dead_reckoning
 
 from torchratslam.cli import main as cli_main
 from torchratslam.sim import (

@@ -6,7 +6,7 @@ import itertools
 
 import numpy as np
 import pytest
-from torchratslam.graph.errors import InputError
+from ratslam_graph.errors import InputError
 
 from torchratslam.sim import get_tour
 from torchratslam.sim.tours import _grid_drive

@@ -3,7 +3,7 @@
 import itertools
 
 import pytest
-from torchratslam.graph.errors import ConfigError, InputError
+from ratslam_graph.errors import ConfigError, InputError
 
 from torchratslam.sweeps.spec import from_dict, load_sweep, parse_values, with_seed
 

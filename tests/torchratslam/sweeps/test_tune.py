@@ -3,7 +3,7 @@
 import csv
 
 import pytest
-from torchratslam.graph.errors import ConfigError, InputError
+from ratslam_graph.errors import ConfigError, InputError
 
 from torchratslam.config import load_config
 from torchratslam.sweeps.tune import parse_range

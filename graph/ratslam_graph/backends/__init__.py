@@ -26,10 +26,10 @@ from collections.abc import Callable
 from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
 
 import numpy as np
-from torchratslam.graph.backends.alpha import AlphaBackend, AlphaReferenceBackend
-from torchratslam.graph.backends.alpha_local import AlphaLocalBackend
-from torchratslam.graph.errors import ConfigError, unknown_name_message
-from torchratslam.graph.posegraph import PoseGraph
+from ratslam_graph.backends.alpha import AlphaBackend, AlphaReferenceBackend
+from ratslam_graph.backends.alpha_local import AlphaLocalBackend
+from ratslam_graph.errors import ConfigError, unknown_name_message
+from ratslam_graph.posegraph import PoseGraph
 
 
 @runtime_checkable
@@ -49,7 +49,7 @@ class Backend(Protocol):
 
 
 if TYPE_CHECKING:
-    from torchratslam.graph.backends.gtsam_backend import (
+    from ratslam_graph.backends.gtsam_backend import (
         GraphErrorEvaluator,
         GtsamBackend,
         ISAM2Backend,
@@ -65,7 +65,7 @@ _GTSAM_NAMES = frozenset(
 
 def __getattr__(name: str) -> Any:
     if name in _GTSAM_NAMES:
-        module = importlib.import_module("torchratslam.graph.backends.gtsam_backend")
+        module = importlib.import_module("ratslam_graph.backends.gtsam_backend")
         return getattr(module, name)
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 

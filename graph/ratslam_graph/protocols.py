@@ -13,8 +13,8 @@ from collections.abc import Mapping
 from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
-from torchratslam.graph.messages import Action
-from torchratslam.graph.posegraph import PoseGraph
+from ratslam_graph.messages import Action
+from ratslam_graph.posegraph import PoseGraph
 
 __all__ = ["ExperienceMapModule", "RelaxationBackend", "Stateful"]
 
@@ -35,7 +35,7 @@ class Stateful(Protocol):
 @runtime_checkable
 class RelaxationBackend(Protocol):
     """What :meth:`ExperienceMap.iterate` needs from a backend (see
-    ``torchratslam.graph.backends.Backend`` for the full interface)."""
+    ``ratslam_graph.backends.Backend`` for the full interface)."""
 
     def relax(self, pg: PoseGraph, *, passes: int, correction: float = 0.5) -> np.ndarray:
         """Return the relaxed (N, 3) poses of ``pg``."""

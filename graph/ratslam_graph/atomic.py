@@ -41,7 +41,7 @@ from collections.abc import Callable, Iterable, Mapping
 from pathlib import Path
 from typing import IO, Any, BinaryIO
 
-from torchratslam.graph.errors import InputError
+from ratslam_graph.errors import InputError
 
 __all__ = [
     "LOCK_NAME",

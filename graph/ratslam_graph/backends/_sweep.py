@@ -2,13 +2,13 @@
 
 The arithmetic is the C++'s, operation for operation: ``clip_rad_180`` and
 ``clip_rad_360`` as subtraction loops (kept here, not
-:func:`torchratslam.graph.geometry.wrap_angle`'s floor remainder, because the two differ
+:func:`ratslam_graph.geometry.wrap_angle`'s floor remainder, because the two differ
 in the last bit and the sweep must reproduce the C++ bit for bit),
 ``get_signed_delta_rad`` with its two clips, the link as ``(d, heading, facing)``,
 poses updated in place link after link. Compiled
 functions are cached on disk by numba (``cache=True``); the first use in a fresh
 environment compiles them (about a second). Call it through
-:func:`torchratslam.graph.backends.alpha.sweep_openratslam`.
+:func:`ratslam_graph.backends.alpha.sweep_openratslam`.
 """
 
 from __future__ import annotations

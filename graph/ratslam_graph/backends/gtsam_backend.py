@@ -21,9 +21,9 @@ from collections.abc import Sequence
 
 import gtsam
 import numpy as np
-from torchratslam.graph.errors import ConfigError, GraphError
-from torchratslam.graph.geometry import wrap_angle
-from torchratslam.graph.posegraph import PoseGraph, UnionFind
+from ratslam_graph.errors import ConfigError, GraphError
+from ratslam_graph.geometry import wrap_angle
+from ratslam_graph.posegraph import PoseGraph, UnionFind
 
 log = logging.getLogger(__name__)
 

@@ -6,7 +6,7 @@ indices ``(from, to)`` and, per edge, the measured pose of ``to`` in ``from``'s 
 ``dx = d cos(heading)``, ``dy = d sin(heading)``, ``dth = facing``.
 
 Also here: odometry composition (the initial estimate of a graph read from a file
-without vertices, through :func:`torchratslam.graph.geometry.chain_poses`) and a
+without vertices, through :func:`ratslam_graph.geometry.chain_poses`) and a
 union-find used to anchor every connected component of a graph.
 """
 
@@ -16,8 +16,8 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
-from torchratslam.graph.errors import InputError
-from torchratslam.graph.geometry import between, chain_poses, wrap_angle
+from ratslam_graph.errors import InputError
+from ratslam_graph.geometry import between, chain_poses, wrap_angle
 
 
 class UnionFind:

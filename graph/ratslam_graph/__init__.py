@@ -3,17 +3,17 @@
 This package must never import ``torchratslam`` (a test enforces the direction).
 """
 
-from torchratslam.graph.backends import make_backend
-from torchratslam.graph.errors import (
+from ratslam_graph.backends import make_backend
+from ratslam_graph.errors import (
     ConfigError,
     GraphError,
     InputError,
     MapFormatError,
     RatSLAMError,
 )
-from torchratslam.graph.messages import Action, ActionKind
-from torchratslam.graph.params import ExperienceMapParams, Params
-from torchratslam.graph.posegraph import PoseGraph
+from ratslam_graph.messages import Action, ActionKind
+from ratslam_graph.params import ExperienceMapParams, Params
+from ratslam_graph.posegraph import PoseGraph
 
 __all__ = [
     "Action",

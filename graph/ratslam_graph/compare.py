@@ -1,7 +1,7 @@
 """Run several backends on the same pose graph and compare them.
 
 For every backend: wall time, the final graph error under ONE common noise model
-(gtsam's ``graph.error`` of the edges, see :mod:`torchratslam.graph.backends.gtsam_backend`), and,
+(gtsam's ``graph.error`` of the edges, see :mod:`ratslam_graph.backends.gtsam_backend`), and,
 when ground truth is given, the position RMSE after rigid SE(2) alignment (ATE).
 The alpha rule and least squares minimise different things: the alpha rule stops at
 a fixed point of its sweep, above the least-squares optimum, and the comparison shows
@@ -15,10 +15,10 @@ from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
-from torchratslam.graph.backends import GraphErrorEvaluator, make_backend
-from torchratslam.graph.errors import InputError
-from torchratslam.graph.geometry import ate_rmse
-from torchratslam.graph.posegraph import PoseGraph
+from ratslam_graph.backends import GraphErrorEvaluator, make_backend
+from ratslam_graph.errors import InputError
+from ratslam_graph.geometry import ate_rmse
+from ratslam_graph.posegraph import PoseGraph
 
 
 def compare_backends(
@@ -35,7 +35,7 @@ def compare_backends(
 
     Args:
         pg: the graph (its poses are the initial estimate for every backend).
-        backends: backend names (see :func:`torchratslam.graph.backends.make_backend`).
+        backends: backend names (see :func:`ratslam_graph.backends.make_backend`).
         groundtruth: optional (N, 2) or (N, 3) true ``x, y(, th)`` per node.
         passes: alpha passes (ignored by gtsam/isam2).
         correction: alpha's ``exp_correction``.
@@ -141,7 +141,7 @@ def lm_error_curve(
         includes building the factor graph.
     """
     import gtsam
-    from torchratslam.graph.backends.gtsam_backend import _values, factor_graph
+    from ratslam_graph.backends.gtsam_backend import _values, factor_graph
 
     evaluate = GraphErrorEvaluator(pg, sigmas=sigmas)
     t0 = time.perf_counter()

@@ -25,7 +25,7 @@ from dataclasses import dataclass
 from typing import Any, TypeVar, overload
 
 import numpy as np
-from torchratslam.graph.errors import InputError
+from ratslam_graph.errors import InputError
 
 TWO_PI = 2.0 * np.pi
 _TAU = 2.0 * math.pi  # the same value as a Python float

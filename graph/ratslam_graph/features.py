@@ -12,7 +12,7 @@ an Overloaded Rat Brain" (IROS 2006), ``shared/papers/experience-map.txt``:
 * the temporal map (Eqs. 10-11) and routes: :func:`temporal_map`, :class:`Route`.
 
 Transitions are written ``[dx, dy, dth]`` everywhere in this project (the pose of the
-target in the source's frame, as in :class:`torchratslam.graph.posegraph.PoseGraph`); the paper
+target in the source's frame, as in :class:`ratslam_graph.posegraph.PoseGraph`); the paper
 writes the same vector as ``(dth, dx, dy)``. Angles are wrapped to ``(-pi, pi]`` as
 OpenRatSLAM's ``clip_rad_180`` does (``geometry.wrap_angle(..., include_pi=True)``).
 Everything here is numpy only (no torch).
@@ -23,8 +23,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-from torchratslam.graph.errors import InputError
-from torchratslam.graph.geometry import ring_distance, signed_delta, wrap_angle
+from ratslam_graph.errors import InputError
+from ratslam_graph.geometry import ring_distance, signed_delta, wrap_angle
 
 __all__ = [
     "Route",
@@ -144,7 +144,7 @@ def rotate_link_components(components: np.ndarray, dtheta: np.ndarray | float) -
 
     In the paper the transition ``(dx, dy)`` is stored in map coordinates, so when map
     correction turns experience ``i`` by ``dth_i`` its outgoing links must turn with it.
-    :class:`torchratslam.graph.experience_map.ExperienceMap` stores links relative to the source's
+    :class:`ratslam_graph.experience_map.ExperienceMap` stores links relative to the source's
     orientation (as OpenRatSLAM does), which makes Eq. 8 hold by construction; its
     ``link_components("global")`` gives the paper's map-frame components.
 

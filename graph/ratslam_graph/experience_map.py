@@ -1,7 +1,7 @@
 """The RatSLAM experience map: a networkx graph with array views, relaxed by a backend.
 
 Behaviour follows OpenRatSLAM's ``ExperienceMap`` (``shared/reference/ratslam-algorithm.md``)
-plus the experience-map paper's features (``torchratslam.graph.features``):
+plus the experience-map paper's features (``ratslam_graph.features``):
 
 * odometry accumulates ``(x, y, facing, time)`` since the current experience, the facing
   starting at ``exp_initial_em_deg``;
@@ -21,9 +21,9 @@ building the pose graph and relaxing never loops over links or nodes in Python; 
 graph's node poses are refreshed lazily when :attr:`ExperienceMap.graph` is read.
 
 Example:
-    >>> from torchratslam.graph.experience_map import ExperienceMap
-    >>> from torchratslam.graph.messages import Action, ActionKind
-    >>> from torchratslam.graph.params import ExperienceMapParams
+    >>> from ratslam_graph.experience_map import ExperienceMap
+    >>> from ratslam_graph.messages import Action, ActionKind
+    >>> from ratslam_graph.params import ExperienceMapParams
     >>> em = ExperienceMap(ExperienceMapParams(exp_initial_em_deg=0.0))
     >>> em.apply(Action(ActionKind.CREATE, dest_id=0))
     >>> em.on_odometry(1.0, 0.0, 2.0)
@@ -41,8 +41,8 @@ from typing import Any
 
 import networkx as nx
 import numpy as np
-from torchratslam.graph.errors import GraphError, InputError, MapFormatError
-from torchratslam.graph.features import (
+from ratslam_graph.errors import GraphError, InputError, MapFormatError
+from ratslam_graph.features import (
     Route,
     average_transition,
     experience_activity,
@@ -51,17 +51,17 @@ from torchratslam.graph.features import (
     rotate_link_components,
     temporal_map,
 )
-from torchratslam.graph.geometry import inverse, wrap_angle
-from torchratslam.graph.messages import Action, ActionKind
-from torchratslam.graph.params import ExperienceMapParams
-from torchratslam.graph.posegraph import PoseGraph
-from torchratslam.graph.protocols import RelaxationBackend
+from ratslam_graph.geometry import inverse, wrap_angle
+from ratslam_graph.messages import Action, ActionKind
+from ratslam_graph.params import ExperienceMapParams
+from ratslam_graph.posegraph import PoseGraph
+from ratslam_graph.protocols import RelaxationBackend
 
 __all__ = ["ExperienceMap", "Route"]
 
 log = logging.getLogger(__name__)
 
-STATE_FORMAT = "torchratslam.graph.experience_map"
+STATE_FORMAT = "ratslam_graph.experience_map"
 STATE_VERSION = 1
 
 
@@ -87,7 +87,7 @@ class ExperienceMap:
         params: experience-map parameters (default: OpenRatSLAM's).
         backend: a relaxation backend object with ``relax(pg, *, passes, correction)``;
             None builds
-                ``torchratslam.graph.backends.make_backend(params.exp_backend)`` on first use.
+                ``ratslam_graph.backends.make_backend(params.exp_backend)`` on first use.
 
     Attributes:
         params: the parameters.
@@ -631,7 +631,7 @@ class ExperienceMap:
         return self._order
 
     def posegraph(self, order: str = "creation") -> PoseGraph:
-        """The map as a :class:`~torchratslam.graph.posegraph.PoseGraph`.
+        """The map as a :class:`~ratslam_graph.posegraph.PoseGraph`.
 
         Built from the arrays, no loops.
 
@@ -658,7 +658,7 @@ class ExperienceMap:
     def backend(self) -> RelaxationBackend:
         """The relaxation backend (built from ``exp_backend`` on first use)."""
         if self._backend is None:
-            from torchratslam.graph.backends import make_backend
+            from ratslam_graph.backends import make_backend
 
             name = self.params.exp_backend
             if name == "alpha":
@@ -712,13 +712,13 @@ class ExperienceMap:
         if alpha and getattr(backend, "schedule", None) == "openratslam":
             # OpenRatSLAM's loop, compiled, in place on the map's own arrays
             # (the arrays are the map's own: float64, C-contiguous, int64 ends)
-            from torchratslam.graph.backends._sweep import sweep
+            from ratslam_graph.backends._sweep import sweep
 
             src, dst, link = self._reference_links()
             budget = self.params.exp_relax_budget
             if budget and loops * len(src) > budget:
                 # a bounded number of updates, on round the links (exp_relax_budget)
-                from torchratslam.graph.backends._sweep import sweep_window
+                from ratslam_graph.backends._sweep import sweep_window
 
                 self._relax_cursor, moved = sweep_window(
                     self._pose,
@@ -895,7 +895,7 @@ class ExperienceMap:
         Args:
             start: the seeded (peak) experience; default the current one.
             method: ``"dijkstra"`` (networkx) or ``"iterate"`` (the paper's synchronous
-                iteration, :func:`torchratslam.graph.features.temporal_map`); same result.
+                iteration, :func:`ratslam_graph.features.temporal_map`); same result.
 
         Shape:
             Returns (N,) seconds, ``inf`` where unreachable.

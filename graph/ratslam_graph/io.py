@@ -25,9 +25,9 @@ import os
 from pathlib import Path
 
 import numpy as np
-from torchratslam.graph.atomic import atomic_write_text
-from torchratslam.graph.errors import InputError, MapFormatError
-from torchratslam.graph.posegraph import PoseGraph, compose_odometry
+from ratslam_graph.atomic import atomic_write_text
+from ratslam_graph.errors import InputError, MapFormatError
+from ratslam_graph.posegraph import PoseGraph, compose_odometry
 
 CITY_SIGMAS = (1.0 / 30.0, 1.0 / 30.0, 1.0 / 100.0)
 """Noise model gtsam's ISAM2_City10000 example uses for city10000 (x, y, th sigmas)."""

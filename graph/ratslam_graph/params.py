@@ -16,7 +16,7 @@ import typing
 from dataclasses import dataclass, field
 from typing import Any, ClassVar, TypeVar
 
-from torchratslam.graph.errors import ConfigError, unknown_name_message
+from ratslam_graph.errors import ConfigError, unknown_name_message
 
 
 def param(default: Any, doc: str = "", **constraints: Any) -> Any:

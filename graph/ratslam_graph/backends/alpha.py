@@ -50,9 +50,9 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from torchratslam.graph.errors import ConfigError
-from torchratslam.graph.geometry import TWO_PI, wrap_angle
-from torchratslam.graph.posegraph import PoseGraph
+from ratslam_graph.errors import ConfigError
+from ratslam_graph.geometry import TWO_PI, wrap_angle
+from ratslam_graph.posegraph import PoseGraph
 
 
 def _check(passes: int, correction: float) -> None:
@@ -218,7 +218,7 @@ def sweep_openratslam(
         raise ConfigError("sweep_openratslam needs writeable C-contiguous float64 poses")
     if passes == 0 or len(src) == 0:
         return 0
-    from torchratslam.graph.backends._sweep import sweep
+    from ratslam_graph.backends._sweep import sweep
 
     return int(
         sweep(

@@ -30,10 +30,10 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from torchratslam.graph.backends.alpha import _check
-from torchratslam.graph.errors import ConfigError
-from torchratslam.graph.geometry import wrap_angle
-from torchratslam.graph.posegraph import PoseGraph
+from ratslam_graph.backends.alpha import _check
+from ratslam_graph.errors import ConfigError
+from ratslam_graph.geometry import wrap_angle
+from ratslam_graph.posegraph import PoseGraph
 
 __all__ = ["AlphaLocalBackend"]
 
@@ -133,7 +133,7 @@ class AlphaLocalBackend:
         Returns:
             ``pose``.
         """
-        from torchratslam.graph.backends._local_sweep import add_links, local_sweeps
+        from ratslam_graph.backends._local_sweep import add_links, local_sweeps
 
         _check(passes, correction)
         n, e = len(pose), len(src)

@@ -1,1 +1,0 @@
-"""The shipped configuration presets (YAML), installed as package data."""
