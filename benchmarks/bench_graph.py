@@ -4,7 +4,7 @@ For each graph: time per pass of the fast alpha rule, graph error after 20, 100 
 1000 passes, wall time (and passes) to reach the error that the compiled
 reference-order loop reaches after 1000 passes, Levenberg-Marquardt time and error,
 and iSAM2 time per added pose (graph fed pose by pose: all of city10000, the first 3000
-poses of w10000). Initial estimate: composed odometry, as for the issue's reference
+poses of w10000). Initial estimate: composed odometry, as for the reference
 figures. ``BENCH_QUICK=1`` shortens the iSAM2 runs and caps the alpha search.
 """
 
@@ -14,12 +14,13 @@ import os
 import time
 
 import numpy as np
+
 from ratslam_graph.backends import GraphErrorEvaluator, make_backend
 from ratslam_graph.geometry import ate_rmse
 from ratslam_graph.io import example_file, read_posegraph, read_poses
 from ratslam_graph.posegraph import PoseGraph
 
-# issue 4: compiled reference-order alpha loop, 1000 passes (error, seconds)
+# the compiled reference-order alpha loop, 1000 passes (error, seconds)
 COMPILED_1000 = {"w10000": (571.0, 2.19), "city10000": (1.01e5, 0.79)}
 FILES = {"w10000": "w10000.graph", "city10000": "T1_city10000_04.txt"}
 

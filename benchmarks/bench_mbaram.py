@@ -16,7 +16,8 @@ from typing import Any
 import numpy as np
 import torch
 
-from torchratslam.mbaram.model import MBARAM, MBARAMParams
+from torchratslam.mbaram.model import MBARAM
+from torchratslam.mbaram.params import MBARAMParams
 
 BEAMS = 682
 

@@ -42,7 +42,8 @@ import torch
 
 from torchratslam.config import PoseCellParams
 from torchratslam.messages import ViewMatch
-from torchratslam.pose_cells.network import PoseCellNetwork, PoseCells
+from torchratslam.pose_cells.network import PoseCellNetwork
+from torchratslam.pose_cells.stage import PoseCells
 
 SIZES = (11, 21, 30, 80)
 BATCHES = (1, 32)
@@ -96,7 +97,7 @@ def measure(quick: bool = False) -> list[dict]:
     for xy in SIZES:
         for batch in BATCHES:
             auto_net = PoseCellNetwork(PoseCellParams(pc_dim_xy=xy, pc_dim_th=36), batch)
-            auto = "numpy" if auto_net._numpy else auto_net.method
+            auto = "numpy" if auto_net.uses_numpy else auto_net.method
             for method in METHODS:
                 if method == "numpy" and batch > 1:
                     continue

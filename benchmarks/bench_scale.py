@@ -1,4 +1,4 @@
-"""City scale (issue 16): the suburb tour, cost per frame as the map grows, both systems.
+"""City scale: the suburb tour, cost per frame as the map grows, both systems.
 
 The simulator's ``suburb`` tour (8 x 8 blocks, a forward camera, 20000 frames by
 default) is written once as a dataset directory with its OpenRatSLAM ``config.txt``

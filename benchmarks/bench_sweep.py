@@ -19,7 +19,7 @@ import time
 
 import torch
 
-from torchratslam.pose_cells.network import PoseCells
+from torchratslam.pose_cells.stage import PoseCells
 from torchratslam.sweeps.runner import TIMING_COLUMNS, run_group, run_one, shares_network
 from torchratslam.sweeps.spec import from_dict
 

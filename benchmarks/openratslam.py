@@ -45,7 +45,7 @@ OpenRatSLAM's C++ build was not found. Build it (once) and point OPENRATSLAM_BUI
   4. make bench OPENRATSLAM_BUILD=BUILD_DIR   (the folder holding ratslam_driver)"""
 
 LOOP_TXT = """\
-; the project's simulated loop (sim:loop) with the parameters of the issue-12 comparison
+; the project's simulated loop (sim:loop) with the parameters of the OpenRatSLAM comparison
 [general]
 [ratslam]
 template_x_size=64

@@ -64,7 +64,7 @@ def test_the_checker_sees_a_print_and_a_foreign_logger(tmp_path):
 
 def test_a_multisession_merge_is_logged(caplog):
     from torchratslam import load_config
-    from torchratslam.maps.state import state_from_slam
+    from torchratslam.maps.running import state_from_slam
     from torchratslam.multisession.session import MultiSessionRatSLAM
     from torchratslam.pipeline import RatSLAM
     from torchratslam.sim import get_tour
@@ -108,7 +108,7 @@ def test_skipped_files_and_missing_odometry_are_logged(tmp_path, caplog):
     with caplog.at_level(logging.INFO, logger="torchratslam"):
         slam = RatSLAM()
         slam.run(reader, progress=False)
-    warned = [r for r in caplog.records if r.name == "torchratslam.pipeline"]
+    warned = [r for r in caplog.records if r.name == "torchratslam.pipeline.ratslam"]
     assert len(warned) == 1 and warned[0].levelno == logging.WARNING
     assert "odometry='visual'" in warned[0].getMessage()
     caplog.clear()
@@ -147,7 +147,7 @@ def test_a_relaxation_that_keeps_moving_is_logged_at_debug(caplog):
         em.apply(Action(ActionKind.CREATE, dest_id=i))
         em.on_odometry(1.0, 1.5, 1.0)
     em.apply(Action(ActionKind.LINK, dest_id=0))
-    with caplog.at_level(logging.DEBUG, logger="torchratslam"):
+    with caplog.at_level(logging.DEBUG, logger="ratslam_graph"):
         em.iterate()
     (rec,) = [r for r in caplog.records if r.name == "ratslam_graph.experience_map"]
     assert rec.levelno == logging.DEBUG and "1 passes of 'alpha'" in rec.getMessage()

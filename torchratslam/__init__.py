@@ -5,10 +5,14 @@ plots, CLI). The experience map and pose-graph backends live in the torch-free
 ``graph`` package.
 """
 
+import logging
+
 from torchratslam.config import RatSLAMConfig, load_config
 from torchratslam.errors import ConfigError, InputError, MapFormatError, RatSLAMError
 
 __version__ = "0.1.0"
+
+logging.getLogger(__name__).addHandler(logging.NullHandler())
 
 __all__ = [
     "ConfigError",

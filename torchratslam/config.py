@@ -4,10 +4,10 @@ Keys are named exactly as in OpenRatSLAM (``shared/reference/parameters.md``); a
 that is absent takes OpenRatSLAM's default. The key space is flat, as in OpenRatSLAM's
 own config files: :func:`load_config` routes each key to the module that owns it.
 
-Behaviour profiles (``behaviour: openratslam``, the default, ``torchratslam`` or
-``torchratslam_v0``) set the keys of :data:`PROFILES` that a config does not set itself:
-OpenRatSLAM exactly, the recommended choices, or the project's behaviour before issue 12
-(``docs/openratslam-fidelity.md``).
+Every key has one default, the field of its dataclass. Two behaviour profiles
+(``behaviour: openratslam``, the default, or ``torchratslam``) set the keys of
+:data:`PROFILES` that a config does not set itself: OpenRatSLAM exactly (the dataclass
+defaults) or the recommended choices (``docs/openratslam-fidelity.md``).
 
 Example:
     >>> from torchratslam.config import load_config
@@ -27,8 +27,9 @@ from typing import Any, ClassVar
 
 import yaml
 
-from ratslam_graph.errors import ConfigError, InputError, unknown_name_message
+from ratslam_graph.errors import unknown_name_message
 from ratslam_graph.params import ExperienceMapParams, Params, param
+from torchratslam.errors import ConfigError, InputError
 
 
 def _presets_dir() -> Path:
@@ -48,6 +49,7 @@ CONFIG_DIR = _presets_dir()
 __all__ = [
     "CONFIG_DIR",
     "PROFILES",
+    "RECOMMENDED",
     "ExperienceMapParams",
     "GeneralParams",
     "LocalViewParams",
@@ -78,9 +80,8 @@ class GeneralParams(Params):
     behaviour: str = param(
         "openratslam",
         "behaviour profile: openratslam (exactly OpenRatSLAM) | torchratslam (the "
-        "recommended choices) | torchratslam_v0 (the project before issue 12); sets every "
-        "key of PROFILES that the config does not set itself",
-        choices=("openratslam", "torchratslam", "torchratslam_v0"),
+        "recommended choices); sets every key of PROFILES that the config does not set itself",
+        choices=("openratslam", "torchratslam"),
     )
     skip_first_odometry: bool = param(
         True,
@@ -116,7 +117,7 @@ class PoseCellParams(Params):
         2.0, "pose-cell distance that makes a new experience", ge=0.0
     )
     pc_vt_restore: float = param(0.05, "decay relaxation per step", ge=0.0)
-    # Issue 12: OpenRatSLAM's exact behaviours (defaults) or the project's choices by name.
+    # OpenRatSLAM's exact behaviours (defaults) or the project's choices, by name.
     pc_decode: str = param(
         "openratslam",
         "packet centre decoding: openratslam (find_best: phasors at (i + 1) 2pi/n, minus one "
@@ -150,8 +151,8 @@ class PoseCellParams(Params):
     pc_engine: str = param(
         "auto",
         "how one CPU network steps: numpy (on the packet's crop, fastest at B = 1) | torch "
-        "(the batched methods) | auto (numpy for one CPU network). The same actions; float32 "
-        "rounding differs, so torch reproduces runs recorded before issue 12 bit for bit",
+        "(the batched methods) | auto (numpy for one CPU network). The same actions in "
+        "float64; in float32 their rounding differs and can tip a near-tie the other way",
         choices=("auto", "numpy", "torch"),
     )
 
@@ -208,61 +209,20 @@ class VisualOdometryParams(Params):
     vtrans_max: float = param(20.0, "cap on the translational speed estimate", ge=0.0)
 
 
-# Behaviour profiles (issue 12): ``behaviour: NAME`` sets each of these keys unless the
-# config sets it itself. "openratslam" is OpenRatSLAM exactly (the defaults of the
-# dataclasses); "torchratslam" the recommended choices; "torchratslam_v0" the project's
-# own behaviour before issue 12 (to reproduce maps made with those versions).
-# docs/openratslam-fidelity.md gives every key's measured effect.
-PROFILES: dict[str, dict[str, Any]] = {
-    "openratslam": {
-        "pc_decode": "openratslam",
-        "vt_inject_rule": "openratslam",
-        "pc_axis": "openratslam",
-        "pc_wrap": "openratslam",
-        "pc_multi_cell": False,
-        "pc_engine": "auto",
-        "skip_first_odometry": True,
-        "action_angle": "injection",
-        "exp_relax": "on_action",
-        "exp_first_at_origin": False,
-        "exp_link_time": "since_start",
-        "exp_relax_order": "openratslam",
-    },
-    # the recommended bundle: OpenRatSLAM plus the choices measured to be as good or
-    # better on all but one simulated set (docs/openratslam-fidelity.md, "When to use
-    # which", has the numbers and the exception)
-    "torchratslam": {
-        "pc_decode": "exact",
-        "vt_inject_rule": "openratslam",
-        "pc_axis": "math",
-        "pc_wrap": "preserve_mass",
-        "pc_multi_cell": True,
-        "pc_engine": "auto",
-        "skip_first_odometry": False,
-        "action_angle": "injection",
-        "exp_relax": "on_action",
-        "exp_first_at_origin": True,
-        "exp_link_time": "per_link",
-        "exp_relax_order": "openratslam",
-    },
-    "torchratslam_v0": {
-        "pc_decode": "exact",
-        "vt_inject_rule": "last_10",
-        "pc_axis": "math",
-        "pc_wrap": "preserve_mass",
-        "pc_multi_cell": True,
-        # the batched torch step: its float32 rounding is what the project's maps before
-        # issue 12 were made with (the numpy step can tip a near-tie the other way)
-        "pc_engine": "torch",
-        "skip_first_odometry": False,
-        "action_angle": "view",
-        "exp_relax": "every_frame",
-        "exp_first_at_origin": True,
-        "exp_link_time": "per_link",
-        "exp_relax_order": "colour",
-    },
+#: The recommended profile, ``behaviour: torchratslam``: OpenRatSLAM plus the choices
+#: measured to be as good or better on all but one simulated set
+#: (docs/openratslam-fidelity.md, "When to use which", has the numbers and the exception).
+#: Each key is set to a value other than its default; the ``openratslam`` profile sets the
+#: same keys to their defaults (:data:`PROFILES`).
+RECOMMENDED: dict[str, Any] = {
+    "pc_decode": "exact",
+    "pc_axis": "math",
+    "pc_wrap": "preserve_mass",
+    "pc_multi_cell": True,
+    "skip_first_odometry": False,
+    "exp_first_at_origin": True,
+    "exp_link_time": "per_link",
 }
-DEFAULT_BEHAVIOUR = "openratslam"
 
 # Keys that only drive OpenRatSLAM's on-screen drawing; accepted and ignored anywhere.
 DISPLAY_KEYS = frozenset(
@@ -347,7 +307,8 @@ class RatSLAMConfig:
         """
         owner = cls.key_owner()
         grouped: dict[str, dict[str, Any]] = {attr: {} for attr in cls.sections()}
-        values = {**profile_values(values.get("behaviour", DEFAULT_BEHAVIOUR), source), **values}
+        behaviour = values.get("behaviour", GeneralParams.behaviour)
+        values = {**profile_values(behaviour, source), **values}
         for key, value in values.items():
             if key in META_KEYS or key in DISPLAY_KEYS:
                 continue
@@ -382,6 +343,23 @@ class RatSLAMConfig:
             old = profile_values(flat["behaviour"], "replace()")
             flat = {k: v for k, v in flat.items() if k not in old or v != old[k]}
         return self.from_flat({**flat, **changes}, source="replace()")
+
+
+def _defaults() -> dict[str, Any]:
+    """Every key's default: the field of the dataclass that owns it."""
+    return {
+        f.name: f.default
+        for klass in RatSLAMConfig.sections().values()
+        for f in dataclasses.fields(klass)
+    }
+
+
+#: The behaviour profiles: ``openratslam`` (the default, OpenRatSLAM exactly: the keys of
+#: :data:`RECOMMENDED` at their dataclass defaults) and ``torchratslam`` (recommended).
+PROFILES: dict[str, dict[str, Any]] = {
+    "openratslam": {key: _defaults()[key] for key in RECOMMENDED},
+    "torchratslam": dict(RECOMMENDED),
+}
 
 
 def profile_values(name: Any, source: str = "config") -> dict[str, Any]:

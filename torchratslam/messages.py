@@ -5,18 +5,20 @@
 * :class:`ViewMatch` -- the local view's verdict on one frame.
 * :class:`~ratslam_graph.messages.Action` -- the pose cells' decision for the experience map
   (defined in the torch-free ``graph`` package, re-exported here).
+* :class:`SessionState` -- where a pipeline's session stands (frames processed, the last
+  frame's time stamp), saved with its map.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 
 from ratslam_graph.messages import Action, ActionKind
 
-__all__ = ["Action", "ActionKind", "Frame", "ViewMatch"]
+__all__ = ["Action", "ActionKind", "Frame", "SessionState", "ViewMatch"]
 
 
 @dataclass(frozen=True)
@@ -65,3 +67,18 @@ class ViewMatch:
     error: float = float("inf")
     offset: int = 0
     is_new: bool = False
+
+
+@dataclass(frozen=True)
+class SessionState:
+    """Where a pipeline's session stands.
+
+    Attributes:
+        frame_index: frames processed so far.
+        last_t: time stamp of the last frame processed (s; 0 before the first).
+    """
+
+    VERSION: ClassVar[int] = 1
+
+    frame_index: int = 0
+    last_t: float = 0.0

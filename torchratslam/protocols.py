@@ -21,20 +21,24 @@ import numpy as np
 
 from ratslam_graph.messages import Action
 from ratslam_graph.protocols import ExperienceMapModule, RelaxationBackend, Stateful
-from torchratslam.messages import Frame, ViewMatch
+from torchratslam.messages import Frame, SessionState, ViewMatch
 
 if TYPE_CHECKING:  # annotations only: importing the protocols does not load torch
     import torch
+
+    from torchratslam.config import RatSLAMConfig
 
 __all__ = [
     "ExperienceMapModule",
     "FrameSource",
     "GroundTruthSource",
+    "InjectionAngle",
     "LocalViewModule",
     "OdometrySource",
     "PoseCellModule",
     "RangeMapper",
     "RelaxationBackend",
+    "SlamSystem",
     "Stateful",
 ]
 
@@ -87,6 +91,23 @@ class PoseCellModule(Protocol):
 
 
 @runtime_checkable
+class InjectionAngle(Protocol):
+    """A pose-cell stage that knows the heading of its last view injection.
+
+    Optional beyond :class:`PoseCellModule`: with ``general.action_angle ==
+    "injection"`` the pipeline gives the experience map the angle
+    ``vt_delta_pc_th * 2 pi / dims[2]`` of a stage that has these members (OpenRatSLAM's
+    ``get_relative_rad``), and the action's own angle otherwise.
+    """
+
+    dims: tuple[int, int, int]
+    """The network's size ``(X, Y, TH)`` in cells."""
+
+    vt_delta_pc_th: float
+    """The heading shift (theta cells) of the last view-template injection."""
+
+
+@runtime_checkable
 class OdometrySource(Protocol):
     """Odometry per frame: ``(vtrans m/s, vrot rad/s, dt s)``."""
 
@@ -131,4 +152,45 @@ class RangeMapper(Protocol):
 
     def __len__(self) -> int:
         """The number of nodes."""
+        ...
+
+
+@runtime_checkable
+class SlamSystem(Protocol):
+    """A running RatSLAM system as the saved-map code sees it (``RatSLAM`` and
+    ``MultiSessionRatSLAM``): its stages, its configuration and its session record.
+
+    Saving and loading a map (:mod:`torchratslam.maps.running`) use nothing else.
+    """
+
+    @property
+    def config(self) -> RatSLAMConfig:
+        """The configuration the stages were built with."""
+        ...
+
+    @property
+    def local_view(self) -> LocalViewModule:
+        """The local-view stage."""
+        ...
+
+    @property
+    def pose_cells(self) -> PoseCellModule:
+        """The pose-cell stage."""
+        ...
+
+    @property
+    def experience_map(self) -> ExperienceMapModule:
+        """The experience-map stage."""
+        ...
+
+    @property
+    def odometry(self) -> OdometrySource:
+        """The odometry source."""
+        ...
+
+    session: SessionState
+    """Frames processed and the last time stamp (assigning it restores them)."""
+
+    def remap_experiences(self, old_to_new: np.ndarray) -> None:
+        """Re-point the per-frame history at new experience ids (after a merge)."""
         ...

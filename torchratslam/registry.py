@@ -17,7 +17,8 @@ from __future__ import annotations
 from collections.abc import Callable, Iterator
 from typing import Any, Generic, TypeVar
 
-from ratslam_graph.errors import ConfigError, unknown_name_message
+from ratslam_graph.errors import unknown_name_message
+from torchratslam.errors import ConfigError
 from torchratslam.protocols import (
     ExperienceMapModule,
     LocalViewModule,
@@ -106,8 +107,9 @@ class Registry(Generic[P]):
         """
         if self.protocol is not None and not isinstance(obj, self.protocol):
             missing = [m for m in _interface(self.protocol) if not hasattr(obj, m)]
+            article = "an" if self.kind[0] in "aeiou" else "a"
             raise ConfigError(
-                f"{type(obj).__name__} is not a {self.kind}: it lacks "
+                f"{type(obj).__name__} is not {article} {self.kind}: it lacks "
                 f"{', '.join(missing) or 'part of the interface'} "
                 f"(see torchratslam.protocols.{self.protocol.__name__})"
             )
@@ -133,6 +135,6 @@ EXPERIENCE_MAPS: Registry[ExperienceMapModule] = Registry("experience map", Expe
 ODOMETRY: Registry[OdometrySource] = Registry("odometry source", OdometrySource)
 RANGE_MAPPERS: Registry[RangeMapper] = Registry("range-sensor mapper", RangeMapper)
 """Place recognition and mapping from laser scans (the alternative to local view + experience
-map for range sensors); ``"mbaram"`` is registered by :mod:`torchratslam.mbaram.model`.
+map for range sensors); ``"mbaram"`` is registered by :mod:`torchratslam.mbaram.mapper`.
 Factory: ``factory(params, *, odometry="groundtruth", dtype, device)``; the mapper has the
 :class:`~torchratslam.protocols.RangeMapper` interface."""

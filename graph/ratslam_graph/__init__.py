@@ -3,6 +3,8 @@
 This package must never import ``torchratslam`` (a test enforces the direction).
 """
 
+import logging
+
 from ratslam_graph.backends import make_backend
 from ratslam_graph.errors import (
     ConfigError,
@@ -14,6 +16,8 @@ from ratslam_graph.errors import (
 from ratslam_graph.messages import Action, ActionKind
 from ratslam_graph.params import ExperienceMapParams, Params
 from ratslam_graph.posegraph import PoseGraph
+
+logging.getLogger(__name__).addHandler(logging.NullHandler())
 
 __all__ = [
     "Action",

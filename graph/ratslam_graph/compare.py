@@ -15,6 +15,7 @@ from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
+
 from ratslam_graph.backends import GraphErrorEvaluator, make_backend
 from ratslam_graph.errors import InputError
 from ratslam_graph.geometry import ate_rmse
@@ -141,6 +142,7 @@ def lm_error_curve(
         includes building the factor graph.
     """
     import gtsam
+
     from ratslam_graph.backends.gtsam_backend import _values, factor_graph
 
     evaluate = GraphErrorEvaluator(pg, sigmas=sigmas)

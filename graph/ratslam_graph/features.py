@@ -23,6 +23,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+
 from ratslam_graph.errors import InputError
 from ratslam_graph.geometry import ring_distance, signed_delta, wrap_angle
 

@@ -25,6 +25,7 @@ from dataclasses import dataclass
 from typing import Any, TypeVar, overload
 
 import numpy as np
+
 from ratslam_graph.errors import InputError
 
 TWO_PI = 2.0 * np.pi

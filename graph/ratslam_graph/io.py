@@ -25,6 +25,7 @@ import os
 from pathlib import Path
 
 import numpy as np
+
 from ratslam_graph.atomic import atomic_write_text
 from ratslam_graph.errors import InputError, MapFormatError
 from ratslam_graph.posegraph import PoseGraph, compose_odometry
@@ -85,7 +86,7 @@ def read_posegraph(
             city for vertex-less files whose edges all have the city layout, else TORO.
         initial: "file" (the VERTEX poses; composed odometry when there are none) or
             "odometry" (always compose the odometry edges ``i -> i+1`` in row order,
-            the initial estimate of the issue-4 reference figures).
+            the initial estimate of the backend-comparison reference figures).
 
     Returns:
         A :class:`PoseGraph`; ``ids`` are the file's vertex ids, rows follow the vertex

@@ -160,9 +160,9 @@ class ExperienceMapParams(Params):
         ge=0.0,
         le=1.0,
     )
-    # Issue 12: OpenRatSLAM's exact behaviours and the project's alternatives, by name.
+    # OpenRatSLAM's exact behaviours and the project's alternatives, by name.
     # Defaults are OpenRatSLAM's; the ``behaviour`` profile of torchratslam.config sets
-    # all of them at once (docs/openratslam-fidelity.md has each one's measured effect).
+    # several of them at once (docs/openratslam-fidelity.md has each one's measured effect).
     exp_relax: str = param(
         "on_action",
         "when the pipeline relaxes the map: on_action (only on frames with an action, as "

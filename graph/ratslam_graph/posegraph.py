@@ -7,7 +7,7 @@ indices ``(from, to)`` and, per edge, the measured pose of ``to`` in ``from``'s 
 
 Also here: odometry composition (the initial estimate of a graph read from a file
 without vertices, through :func:`ratslam_graph.geometry.chain_poses`) and a
-union-find used to anchor every connected component of a graph.
+union-find that anchors every connected component of a graph.
 """
 
 from __future__ import annotations
@@ -16,6 +16,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
+
 from ratslam_graph.errors import InputError
 from ratslam_graph.geometry import between, chain_poses, wrap_angle
 

@@ -10,11 +10,15 @@ probing attribute by attribute; the torch-side stages are in
 from __future__ import annotations
 
 from collections.abc import Mapping
-from typing import Any, Protocol, runtime_checkable
+from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
 
 import numpy as np
+
 from ratslam_graph.messages import Action
 from ratslam_graph.posegraph import PoseGraph
+
+if TYPE_CHECKING:
+    import networkx as nx
 
 __all__ = ["ExperienceMapModule", "RelaxationBackend", "Stateful"]
 
@@ -50,6 +54,25 @@ class ExperienceMapModule(Protocol):
     """
 
     current_id: int
+
+    def __len__(self) -> int:
+        """Number of experiences."""
+        ...
+
+    @property
+    def num_links(self) -> int:
+        """Number of links."""
+        ...
+
+    @property
+    def poses(self) -> np.ndarray:
+        """Experience poses ``[x, y, th]`` (row = experience id). Shape: ``(N, 3)``."""
+        ...
+
+    @property
+    def graph(self) -> nx.DiGraph:
+        """The map as a :class:`networkx.DiGraph` (read-only)."""
+        ...
 
     def on_odometry(self, vtrans: float, vrot: float, dt: float) -> None:
         """Accumulate one interval of odometry."""

@@ -1,4 +1,4 @@
-"""Every bad input of issue 14 gets one line from the project's errors, naming the source;
+"""Every bad input gets one line from the project's errors, naming the source;
 no silent wrong result from the readers (frame order, options, time bases, speeds)."""
 
 from __future__ import annotations
@@ -10,12 +10,12 @@ import shutil
 import cv2
 import numpy as np
 import pytest
-from ratslam_graph.io import read_posegraph
 
+from ratslam_graph.io import read_posegraph
 from torchratslam.config import check_config_limits, load_config
 from torchratslam.errors import ConfigError, InputError, MapFormatError, RatSLAMError
+from torchratslam.maps.native import load_map, save_map
 from torchratslam.maps.reference_format import read_reference
-from torchratslam.maps.state import load_map, save_map
 from torchratslam.readers.datasets import DirectoryReader, natural_key, open_data
 
 from .maps.test_reference_format import CFG as REF_CFG

@@ -154,7 +154,7 @@ def test_modules_are_chosen_by_name_in_the_config():
     assert cfg.general.experience_map == "mine" and cfg.general.pose_cells == "ratslam"
 
 
-# ----------------------------------------------------------- behaviour profiles (issue 12)
+# ----------------------------------------------------------------- behaviour profiles
 def _switches(cfg: RatSLAMConfig) -> dict:
     from torchratslam.config import PROFILES
 
@@ -163,43 +163,50 @@ def _switches(cfg: RatSLAMConfig) -> dict:
 
 
 def test_the_default_behaviour_is_openratslam_and_a_profile_sets_every_switch():
-    from torchratslam.config import PROFILES
+    import dataclasses
 
-    assert set(PROFILES) == {"openratslam", "torchratslam", "torchratslam_v0"}
-    assert set(PROFILES["openratslam"]) == set(PROFILES["torchratslam"])
-    assert set(PROFILES["openratslam"]) == set(PROFILES["torchratslam_v0"])
+    from torchratslam.config import PROFILES, RECOMMENDED
+
+    assert set(PROFILES) == {"openratslam", "torchratslam"}
+    assert set(PROFILES["openratslam"]) == set(PROFILES["torchratslam"]) == set(RECOMMENDED)
     owner = RatSLAMConfig.key_owner()
-    assert set(PROFILES["openratslam"]) <= set(owner)  # every switch is a real key
-    default = load_config()
-    assert default.general.behaviour == "openratslam"
-    assert _switches(default) == PROFILES["openratslam"]
-    assert _switches(RatSLAMConfig()) == PROFILES["openratslam"]  # the dataclass defaults
-    for name in ("torchratslam", "torchratslam_v0"):
-        own = load_config(behaviour=name)
-        assert _switches(own) == PROFILES[name]
-        for key, value in PROFILES[name].items():  # each key lands in its module
-            assert getattr(getattr(own, owner[key]), key) == value
-    assert load_config(behaviour="torchratslam_v0").experience_map.exp_relax == "every_frame"
+    assert set(RECOMMENDED) <= set(owner)  # every switch is a real key
+    # the openratslam profile is the dataclass defaults; the recommended one changes each
+    for key, value in RECOMMENDED.items():
+        klass = RatSLAMConfig.sections()[owner[key]]
+        default = {f.name: f.default for f in dataclasses.fields(klass)}[key]
+        assert PROFILES["openratslam"][key] == default != value
+    default_cfg = load_config()
+    assert default_cfg.general.behaviour == "openratslam"
+    assert default_cfg == RatSLAMConfig()  # no profile value differs from a default
+    assert _switches(default_cfg) == PROFILES["openratslam"]
     rec = load_config(behaviour="torchratslam")  # the recommended bundle
+    assert _switches(rec) == RECOMMENDED
+    for key, value in RECOMMENDED.items():  # each key lands in its module
+        assert getattr(getattr(rec, owner[key]), key) == value
+    # keys outside the profiles keep their defaults under either profile
+    flat, rec_flat = default_cfg.to_flat(), rec.to_flat()
+    assert {k for k in flat if flat[k] != rec_flat[k]} == set(RECOMMENDED) | {"behaviour"}
     assert rec.experience_map.exp_relax == "on_action" and rec.pose_cells.pc_multi_cell
 
 
 def test_explicit_keys_override_the_profile(tmp_path: Path):
     p = tmp_path / "c.yaml"
-    p.write_text("behaviour: torchratslam_v0\nexp_relax: on_action\npc_dim_xy: 15\n")
+    p.write_text("behaviour: torchratslam\nexp_link_time: since_start\npc_dim_xy: 15\n")
     cfg = load_config(p)
-    assert cfg.experience_map.exp_relax == "on_action"  # the file's own key wins
-    assert cfg.experience_map.exp_relax_order == "colour"  # the rest from the profile
+    assert cfg.experience_map.exp_link_time == "since_start"  # the file's own key wins
+    assert cfg.experience_map.exp_first_at_origin  # the rest from the profile
     assert cfg.pose_cells.pc_dim_xy == 15
-    assert load_config(p, exp_relax_order="openratslam").experience_map.exp_relax_order == (
-        "openratslam"
-    )
+    assert not load_config(p, exp_first_at_origin=False).experience_map.exp_first_at_origin
     # replace() switches the profile but keeps keys the config set itself
     back = cfg.replace(behaviour="openratslam")
     assert back.general.behaviour == "openratslam" and back.general.skip_first_odometry
-    assert back.experience_map.exp_relax_order == "openratslam"
-    for name in ("torchratslam", "torchratslam_v0"):
-        assert load_config().replace(behaviour=name) == load_config(behaviour=name)
+    assert not back.experience_map.exp_first_at_origin and back.pose_cells.pc_dim_xy == 15
+    mine = load_config(behaviour="torchratslam", exp_link_time="since_start")
+    assert mine.replace(behaviour="openratslam") == load_config(exp_link_time="since_start")
+    kept = load_config(exp_link_time="per_link").replace(behaviour="torchratslam")
+    assert kept == load_config(behaviour="torchratslam")
+    assert load_config().replace(behaviour="torchratslam") == load_config(behaviour="torchratslam")
     # the saved flat form reloads to the same config
     assert RatSLAMConfig.from_flat(cfg.to_flat()) == cfg
 

@@ -6,7 +6,7 @@ import torch
 
 from torchratslam import ConfigError, RatSLAM, load_config
 from torchratslam.config import LocalViewParams, RatSLAMConfig
-from torchratslam.local_view.view import TemplateMatcher
+from torchratslam.local_view.matcher import TemplateMatcher
 from torchratslam.readers.datasets import open_data
 
 

@@ -29,12 +29,12 @@ import pytest
 import yaml
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
-from ratslam_graph.io import read_posegraph
 
+from ratslam_graph.io import read_posegraph
 from torchratslam.config import RatSLAMConfig, check_config_limits, load_config
 from torchratslam.errors import RatSLAMError
+from torchratslam.maps.native import load_map, save_map
 from torchratslam.maps.reference_format import FILES, read_reference
-from torchratslam.maps.state import load_map, save_map
 from torchratslam.readers.datasets import read_groundtruth_csv, read_odometry_csv
 
 from .maps.test_reference_format import CFG as REF_CFG

@@ -25,9 +25,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
+
 from ratslam_graph.experience_map import ExperienceMap
 from ratslam_graph.messages import Action, ActionKind
-
 from torchratslam.config import load_config
 from torchratslam.messages import Frame
 from torchratslam.pipeline import RatSLAM

@@ -6,18 +6,20 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import torch
+
 from ratslam_graph.backends import AlphaBackend
 from ratslam_graph.experience_map import ExperienceMap
-
 from torchratslam.config import RatSLAMConfig, load_config
 from torchratslam.errors import ConfigError, MapFormatError
-from torchratslam.maps.state import state_from_slam
+from torchratslam.maps.running import state_from_slam
 from torchratslam.messages import Frame
 from torchratslam.pipeline import RatSLAM
+from torchratslam.pipeline.defaults import DEFAULTS
 from torchratslam.protocols import (
     ExperienceMapModule,
     FrameSource,
     GroundTruthSource,
+    InjectionAngle,
     LocalViewModule,
     OdometrySource,
     PoseCellModule,
@@ -25,7 +27,7 @@ from torchratslam.protocols import (
     Stateful,
 )
 from torchratslam.readers.visual_odometry import GivenOdometry, VisualOdometry
-from torchratslam.registry import LOCAL_VIEWS, ODOMETRY, POSE_CELLS, Registry
+from torchratslam.registry import EXPERIENCE_MAPS, LOCAL_VIEWS, ODOMETRY, POSE_CELLS, Registry
 from torchratslam.sim import get_tour
 
 
@@ -48,6 +50,49 @@ def test_shipped_modules_have_their_stage_interfaces():
         assert isinstance(POSE_CELLS.build(name, slam.config.pose_cells), PoseCellModule)
     for name in ODOMETRY:
         assert callable(ODOMETRY.build(name, slam.config.visual_odometry))
+
+
+def test_the_default_stages_have_what_the_pipeline_reads():
+    slam = RatSLAM(load_config("virtual_tour"))
+    slam.run(get_tour("virtual_tour").sessions[0].frames(0, 30), progress=False)
+    em, pcs = slam.experience_map, slam.pose_cells
+    for registry, name, _ in DEFAULTS:  # tests may register maps of their own
+        if registry is EXPERIENCE_MAPS:
+            built = EXPERIENCE_MAPS.build(name, slam.config.experience_map)
+            assert isinstance(built, ExperienceMapModule)
+    # the members the protocol names answer like the map's own arrays and graph
+    assert len(em) == em.poses.shape[0] == em.graph.number_of_nodes() > 1
+    assert em.num_links == em.graph.number_of_edges() == len(em.links()["src"])
+    assert slam.counts() == (len(slam.local_view), len(em), em.num_links)
+    # the shipped pose cells report their injection angle; a bare stage does not
+    assert isinstance(pcs, InjectionAngle) and pcs.dims == (
+        pcs.activity.shape[2],
+        pcs.activity.shape[1],
+        pcs.activity.shape[0],
+    )
+    assert not isinstance(object(), InjectionAngle)
+
+
+def test_an_experience_map_without_poses_or_graph_is_refused():
+    class ChainOnly:
+        current_id = -1
+
+        def __len__(self):
+            return 0
+
+        def on_odometry(self, vtrans, vrot, dt):
+            pass
+
+        def apply(self, action, *, frame, t, pc, template_id):
+            pass
+
+        def iterate(self):
+            pass
+
+    with pytest.raises(
+        ConfigError, match=r"ChainOnly is not .*: it lacks graph, num_links, poses "
+    ):
+        RatSLAM(experience_map=ChainOnly())
 
 
 def test_registry_rejects_a_module_without_the_interface_naming_what_it_lacks():

@@ -33,7 +33,7 @@ import traceback
 from collections.abc import Sequence
 from typing import Any
 
-from ratslam_graph.errors import ConfigError, RatSLAMError
+from torchratslam.errors import ConfigError, RatSLAMError
 
 EPILOG = """examples:
   torchratslam simulate virtual_tour --out data/vt --sessions

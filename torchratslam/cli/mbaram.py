@@ -10,8 +10,8 @@ import argparse
 from pathlib import Path
 from typing import Any
 
+from torchratslam.errors import ConfigError
 from torchratslam.experiments.mbaram_tour import PRESETS
-from ratslam_graph.errors import ConfigError
 
 # The experiment is torchratslam.experiments.mbaram_tour; this module parses the
 # arguments and calls it.
@@ -114,22 +114,28 @@ def _parse_sets(items: list[str]) -> dict[str, str]:
 
 def main(args: argparse.Namespace) -> int:
     """Run the subcommand."""
-    from torchratslam.experiments.mbaram_tour import run_experiment, summary_line
+    from torchratslam.experiments.mbaram_tour import (
+        MBARAMTourOptions,
+        run_experiment,
+        summary_line,
+    )
 
-    _, metrics = run_experiment(
+    tour = run_experiment(
         args.data,
         args.out,
-        laps=args.laps,
-        loc_laps=args.loc_laps,
-        seed=args.seed,
-        moving_obstacles=args.moving_obstacles,
-        moved_obstacles=args.moved_obstacles,
-        odometry=args.odometry,
-        preset=args.preset,
-        overrides=_parse_sets(args.set),
-        plots=not args.no_plots,
-        progress=not args.no_progress,
-        mapper=args.mapper,
+        MBARAMTourOptions(
+            laps=args.laps,
+            loc_laps=args.loc_laps,
+            seed=args.seed,
+            moving_obstacles=args.moving_obstacles,
+            moved_obstacles=args.moved_obstacles,
+            odometry=args.odometry,
+            preset=args.preset,
+            overrides=_parse_sets(args.set),
+            plots=not args.no_plots,
+            progress=not args.no_progress,
+            mapper=args.mapper,
+        ),
     )
-    print(summary_line(args.data, metrics, Path(args.out)))
+    print(summary_line(args.data, tour.metrics, Path(args.out)))
     return 0

@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 
 from torchratslam.config import load_config
-from ratslam_graph.errors import GraphError
+from torchratslam.errors import GraphError
 
 
 def register(subparsers: Any) -> argparse.ArgumentParser:
@@ -121,8 +121,9 @@ def match_last_template(loaded: Any, partial: Any, config: Any) -> tuple[int, fl
 def main(args: argparse.Namespace) -> int:
     from torchratslam.maps.io import load_state
     from torchratslam.maps.merge import merge_maps
+    from torchratslam.maps.native import save_map
     from torchratslam.maps.reference_format import write_reference
-    from torchratslam.maps.state import apply_experience_map, save_map
+    from torchratslam.maps.running import apply_experience_map
 
     config = load_config(args.config)
     loaded = load_state(args.loaded, config)

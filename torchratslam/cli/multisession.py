@@ -12,8 +12,8 @@ ablation and backend comparison), ``report.md`` (the same as tables), figures li
 paper's Fig. 9 (``fig9_*.png``: single map, first session, before merge, after merge,
 final, ICP overlay) and the session maps (``multi/<session>/state``).
 """
-# The experiment is torchratslam.experiments.multisession_tour; this module parses
-# the arguments and calls it.
+# The experiment is torchratslam.experiments.multisession_tour (seeds: multisession_seeds);
+# this module parses the arguments and calls it.
 
 from __future__ import annotations
 
@@ -146,7 +146,7 @@ def register(subparsers: Any) -> argparse.ArgumentParser:
 
 def parse_seeds(spec: str) -> list[int]:
     """``"0-9"`` or ``"0,3,5"`` (or both, comma-separated) -> the seeds."""
-    from ratslam_graph.errors import ConfigError
+    from torchratslam.errors import ConfigError
 
     seeds: list[int] = []
     try:
@@ -164,8 +164,8 @@ def _seeds_main(args: argparse.Namespace, overrides: dict[str, str], merge: dict
     import json
     import sys
 
-    from torchratslam.experiments.multisession_tour import seed_table, seed_table_markdown
     from ratslam_graph.io import atomic_write_text
+    from torchratslam.experiments.multisession_seeds import seed_table, seed_table_markdown
 
     seeds = parse_seeds(args.seeds)
     out = Path(args.out)
@@ -205,8 +205,9 @@ def _seeds_main(args: argparse.Namespace, overrides: dict[str, str], merge: dict
 
 
 def main(args: argparse.Namespace) -> int:
-    from torchratslam.experiments.multisession_tour import report_markdown, run_experiment
-    from ratslam_graph.errors import ConfigError
+    from torchratslam.errors import ConfigError
+    from torchratslam.experiments.multisession_report import report_markdown
+    from torchratslam.experiments.multisession_tour import MultisessionOptions, run_experiment
 
     backends = tuple(b.strip() for b in args.backends.split(",") if b.strip())
     overrides = {}
@@ -231,19 +232,21 @@ def main(args: argparse.Namespace) -> int:
         args.config,
         args.tour,
         args.out,
-        ablation=args.ablation,
-        backends=backends,
-        seed=args.seed,
-        max_frames=args.max_frames,
-        figures=not args.no_figures,
-        progress=not args.quiet,
-        overrides=overrides,
-        merge_options=merge,
-        merge_threshold=args.merge_threshold,
-        merge_persist=args.merge_persist,
-        merge_absorb=args.merge_absorb,
-        rerun=args.rerun,
-        rerun_save=args.rerun_save,
+        MultisessionOptions(
+            ablation=args.ablation,
+            backends=backends,
+            seed=args.seed,
+            max_frames=args.max_frames,
+            figures=not args.no_figures,
+            progress=not args.quiet,
+            overrides=overrides,
+            merge_options=merge,
+            merge_threshold=args.merge_threshold,
+            merge_persist=args.merge_persist,
+            merge_absorb=args.merge_absorb,
+            rerun=args.rerun,
+            rerun_save=args.rerun_save,
+        ),
     )
     print(report_markdown(result["report"]))
     print(f"wrote {Path(args.out) / 'report.json'}")

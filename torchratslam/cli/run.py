@@ -6,7 +6,7 @@ import argparse
 from pathlib import Path
 from typing import Any
 
-from ratslam_graph.errors import ConfigError, InputError
+from torchratslam.errors import ConfigError, InputError
 from torchratslam.readers.limits import MAX_SPEED, MAX_TURN_RATE
 
 DESCRIPTION = """Run RatSLAM on a dataset.
@@ -16,7 +16,7 @@ mean/median ms per frame, ate_rmse_m when there is ground truth), experiences.cs
 (id,x,y,th,created_frame; final poses), trajectory.csv (frame,t,experience_id,x,y,th:
 the experience current after each frame, with its final pose), map.png,
 pose_cells.png and the saved map state in OUT/state (load it with --load or
-torchratslam.maps.state.load_state).
+torchratslam.maps.native.load_state).
 
 Everything that can be checked is checked before the first frame (OUT, the data's
 counts, the device, the config's limits). One run writes to an OUT at a time (a lock).
@@ -224,13 +224,18 @@ def _overrides(items: list[str]) -> dict[str, str]:
 
 
 def main(args: argparse.Namespace) -> int:
-    from torchratslam.experiments.run_dataset import (
-        RUN_RECORD,
-        resume_run,
-        run_dataset,
-        summary_line,
-    )
+    from torchratslam.experiments.run_dataset import resume_run, run_dataset
+    from torchratslam.experiments.run_options import RunOptions, RunSettings
+    from torchratslam.experiments.run_outputs import summary_line
+    from torchratslam.experiments.run_state import RUN_RECORD
 
+    settings = RunSettings(
+        device=args.device,
+        progress=not args.no_progress,
+        threads=args.threads,
+        scale_report=args.scale_report,
+        checkpoint_every=args.checkpoint_every,
+    )
     if args.resume is not None:
         given = [
             f"--{k.replace('_', '-')}"
@@ -243,14 +248,7 @@ def main(args: argparse.Namespace) -> int:
                 f"--resume takes the stopped run's options from {RUN_RECORD}; "
                 f"do not give {', '.join(given)}"
             )
-        metrics = resume_run(
-            args.resume,
-            device=args.device,
-            progress=not args.no_progress,
-            threads=args.threads,
-            scale_report=args.scale_report,
-            checkpoint_every=args.checkpoint_every,
-        )
+        metrics = resume_run(args.resume, settings)
         print(summary_line(metrics, Path(args.resume)))
         return 0
     missing = [f"--{k}" for k in ("config", "data", "out") if not getattr(args, k)]
@@ -259,29 +257,24 @@ def main(args: argparse.Namespace) -> int:
     overrides = _overrides(args.set)
     if args.backend:
         overrides["exp_backend"] = args.backend
-    metrics = run_dataset(
-        args.config,
-        args.data,
-        args.out,
+    options = RunOptions(
+        config=args.config,
+        data=args.data,
         overrides=overrides,
-        odometry_file=args.odometry,
+        max_frames=args.max_frames,
+        odometry=args.odometry,
         groundtruth=args.groundtruth,
+        visual_odometry=args.visual_odometry,
+        load=tuple(args.load),
+        pipelined=args.pipelined,
         image_topic=args.image_topic,
         odom_topic=args.odom_topic,
-        visual_odometry=args.visual_odometry,
-        load=args.load,
-        device=args.device,
-        pipelined=args.pipelined,
-        max_frames=args.max_frames,
-        progress=not args.no_progress,
-        threads=args.threads,
-        scale_report=args.scale_report,
+        max_speed=args.max_speed,
+        max_turn_rate=args.max_turn_rate,
         tum=args.tum,
         rerun=args.rerun,
         rerun_save=args.rerun_save,
-        checkpoint_every=args.checkpoint_every,
-        max_speed=args.max_speed,
-        max_turn_rate=args.max_turn_rate,
     )
+    metrics = run_dataset(options, args.out, settings)
     print(summary_line(metrics, Path(args.out)))
     return 0

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import yaml
 
-from ratslam_graph.errors import InputError
+from torchratslam.errors import InputError
 
 HELP = "write a simulated tour (sim:NAME) as a dataset directory (frames/, odometry.csv, ...)"
 
@@ -108,8 +108,8 @@ def run(args: argparse.Namespace) -> int:
 
 def _write_config_txt(preset: str, directory: Path) -> Path:
     """Write the preset as ``directory/config.txt`` in OpenRatSLAM's ini format."""
-    from torchratslam.config import load_config, to_openratslam_txt
     from ratslam_graph.io import atomic_write_text
+    from torchratslam.config import load_config, to_openratslam_txt
 
     path = directory / "config.txt"
     text = to_openratslam_txt(load_config(preset), comment=f"torchratslam preset {preset!r}")

@@ -92,7 +92,7 @@ def add_execution_args(p: argparse.ArgumentParser) -> None:
 
 
 def main(args: argparse.Namespace) -> int:
-    from ratslam_graph.errors import InputError
+    from torchratslam.errors import InputError
     from torchratslam.sweeps import sweep
 
     if args.workers is not None and args.workers < 1:

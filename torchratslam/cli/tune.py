@@ -130,7 +130,7 @@ def register(subparsers: Any) -> argparse.ArgumentParser:
 
 
 def _pairs(items: list[str], flag: str) -> dict[str, str]:
-    from ratslam_graph.errors import ConfigError
+    from torchratslam.errors import ConfigError
 
     out: dict[str, str] = {}
     for item in items:
@@ -142,7 +142,7 @@ def _pairs(items: list[str], flag: str) -> dict[str, str]:
 
 
 def main(args: argparse.Namespace) -> int:
-    from ratslam_graph.errors import InputError
+    from torchratslam.errors import InputError
     from torchratslam.sweeps import tune
 
     try:

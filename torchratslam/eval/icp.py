@@ -33,7 +33,7 @@ from typing import Any
 
 import numpy as np
 
-from ratslam_graph.errors import InputError
+from torchratslam.errors import InputError
 
 __all__ = [
     "PAPER_ICP_MSE_M2",

@@ -21,7 +21,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ratslam_graph.errors import InputError
 from ratslam_graph.geometry import (
     Se2Alignment,
     align_se2,
@@ -30,6 +29,7 @@ from ratslam_graph.geometry import (
     dead_reckoning,
     wrap_angle,
 )
+from torchratslam.errors import InputError
 
 __all__ = [
     "IcpResult",

@@ -1,4 +1,4 @@
-"""How a run's per-frame cost grows with its map: the scale report (issue 16).
+"""How a run's per-frame cost grows with its map: the scale report.
 
 A long run is cut into ``parts`` equal spans of frames (tenths by default). For each
 span the report gives the mean milliseconds per frame of every module, the map's size
@@ -28,7 +28,7 @@ from typing import Any
 
 import numpy as np
 
-from ratslam_graph.errors import InputError
+from torchratslam.errors import InputError
 
 __all__ = [
     "ScaleRecorder",

@@ -36,9 +36,9 @@ from typing import Any
 
 import numpy as np
 
-from ratslam_graph.errors import InputError, MapFormatError
 from ratslam_graph.geometry import wrap_angle
 from ratslam_graph.messages import ActionKind
+from torchratslam.errors import InputError, MapFormatError
 
 __all__ = [
     "FramePoseRecorder",

@@ -12,7 +12,7 @@ from typing import Any
 import numpy as np
 
 from ratslam_graph.atomic import atomic_write_text
-from ratslam_graph.errors import InputError
+from torchratslam.errors import InputError
 
 __all__ = [
     "format_table",

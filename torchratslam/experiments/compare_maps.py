@@ -17,8 +17,8 @@ from typing import Any
 
 import numpy as np
 
+from torchratslam.errors import InputError
 from torchratslam.eval.icp import compare_icp, libicp_point_to_point
-from ratslam_graph.errors import InputError
 from torchratslam.maps.io import load_state, map_format
 from torchratslam.viz.plots import draw_icp_overlay, save_figure
 

@@ -35,17 +35,20 @@ def run_multisession_demo(
     Returns:
         The path of the written ``report.md``.
     """
-    from torchratslam.experiments.multisession_tour import report_markdown, run_experiment
+    from torchratslam.experiments.multisession_report import report_markdown
+    from torchratslam.experiments.multisession_tour import MultisessionOptions, run_experiment
 
     out = Path(out_dir) / "multisession"
     result = run_experiment(
         None,
         "sim:virtual_tour",
         out,
-        ablation=True,
-        backends=("alpha", "gtsam"),
-        progress=progress,
-        overrides=overrides or {},
+        MultisessionOptions(
+            ablation=True,
+            backends=("alpha", "gtsam"),
+            progress=progress,
+            overrides=overrides or {},
+        ),
     )
     print(report_markdown(result["report"]))
     return out / "report.md"

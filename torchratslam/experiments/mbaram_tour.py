@@ -6,21 +6,24 @@ and the figures.
 
 from __future__ import annotations
 
-import inspect
 import json
-from collections.abc import Iterator
+from collections.abc import Iterator, Mapping
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from ratslam_graph.atomic import atomic_write_text, atomic_write_with
-from ratslam_graph.errors import ConfigError, InputError
+from torchratslam.errors import ConfigError, InputError
 from torchratslam.messages import Frame
 
 __all__ = [
     "PAPER",
     "PRESETS",
+    "MBARAMTourMetrics",
+    "MBARAMTourOptions",
+    "MBARAMTourResult",
     "laser_frames",
     "run_experiment",
     "sim_session",
@@ -49,6 +52,84 @@ PAPER = {
 }
 
 
+@dataclass(frozen=True)
+class MBARAMTourOptions:
+    """How :func:`run_experiment` maps and localises.
+
+    Attributes:
+        laps: mapping laps.
+        loc_laps: localisation laps after the mapping.
+        seed: the simulator's seed.
+        moving_obstacles: pedestrians walking along the path.
+        moved_obstacles: boxes that move between laps.
+        odometry: ``groundtruth`` or ``integrated`` (the odometry channel's source).
+        preset: a key of :data:`PRESETS`; ``overrides`` are MBARAM parameters over it.
+        overrides: MBARAM parameters over the preset.
+        plots: write the figures.
+        progress: a labelled progress bar per lap (lap k/N, frames).
+        mapper: the range-sensor mapper (a name in ``registry.RANGE_MAPPERS``).
+    """
+
+    laps: int = 5
+    loc_laps: int = 5
+    seed: int = 0
+    moving_obstacles: int = 2
+    moved_obstacles: int = 2
+    odometry: str = "groundtruth"
+    preset: str = "sim"
+    overrides: Mapping[str, str] = field(default_factory=dict)
+    plots: bool = True
+    progress: bool = False
+    mapper: str = "mbaram"
+
+
+@dataclass(frozen=True)
+class MBARAMTourMetrics:
+    """What ``metrics.json`` holds: the mapper's metrics, then the tour's settings.
+
+    Attributes:
+        mapper: the :func:`~torchratslam.mbaram.run.run_mbaram` metrics (nodes, edges,
+            frames, qe, qe_m, cr, nodes_per_lap, localisation rates, ...).
+        data: the simulator spec.
+        seed: the simulator's seed.
+        moving_obstacles: pedestrians walking along the path.
+        moved_obstacles: boxes that move between laps.
+        preset: the parameter preset.
+        laps: mapping laps run.
+        loc_laps: localisation laps run.
+        paper: the paper's results (:data:`PAPER`).
+    """
+
+    mapper: dict[str, Any]
+    data: str
+    seed: int
+    moving_obstacles: int
+    moved_obstacles: int
+    preset: str
+    laps: int
+    loc_laps: int
+    paper: dict[str, Any]
+
+    def to_json(self) -> dict[str, Any]:
+        """The mapper's metrics followed by the tour's fields (metrics.json's order)."""
+        tour = asdict(self)
+        del tour["mapper"]
+        return {**self.mapper, **tour}
+
+
+@dataclass(frozen=True)
+class MBARAMTourResult:
+    """What :func:`run_experiment` returns.
+
+    Attributes:
+        run: the :func:`~torchratslam.mbaram.run.run_mbaram` result.
+        metrics: the metrics written.
+    """
+
+    run: Any
+    metrics: MBARAMTourMetrics
+
+
 def sim_session(spec: str, *, laps: int, seed: int, moving: int, moved: int) -> Any:
     """The simulated session of ``spec`` with lasers on and enough laps."""
     from torchratslam.sim import get_tour
@@ -59,7 +140,7 @@ def sim_session(spec: str, *, laps: int, seed: int, moving: int, moved: int) -> 
     options.setdefault("lasers", True)
     options.setdefault("moving_obstacles", moving)
     options.setdefault("moved_obstacles", moved)
-    if "laps" in inspect.signature(TOURS[name]).parameters:
+    if "laps" in TOURS[name].options:
         options.setdefault("laps", laps)
     seed = int(options.pop("seed", seed))
     tour = get_tour(name, seed=seed, **options)
@@ -125,10 +206,10 @@ def _check(data: str, laps: int, loc_laps: int) -> None:
         )
 
 
-def _write_outputs(result: Any, metrics: dict[str, Any], out: Path) -> None:
+def _write_outputs(result: Any, metrics: MBARAMTourMetrics, out: Path) -> None:
     """``metrics.json`` and ``state.npz`` (the map's arrays and node positions)."""
     out.mkdir(parents=True, exist_ok=True)
-    atomic_write_text(out / "metrics.json", json.dumps(metrics, indent=2) + "\n")
+    atomic_write_text(out / "metrics.json", json.dumps(metrics.to_json(), indent=2) + "\n")
     state = result.model.get_state()
     arrays = {k.replace("/", "__"): np.asarray(v) for k, v in state.items() if k != "params"}
     atomic_write_with(
@@ -138,34 +219,19 @@ def _write_outputs(result: Any, metrics: dict[str, Any], out: Path) -> None:
 
 
 def run_experiment(
-    data: str,
-    out: str | Path,
-    *,
-    laps: int = 5,
-    loc_laps: int = 5,
-    seed: int = 0,
-    moving_obstacles: int = 2,
-    moved_obstacles: int = 2,
-    odometry: str = "groundtruth",
-    preset: str = "sim",
-    overrides: dict[str, str] | None = None,
-    plots: bool = True,
-    progress: bool = False,
-    mapper: str = "mbaram",
-) -> tuple[Any, dict[str, Any]]:
-    """Map ``laps`` laps of the simulated tour ``data``, localise on ``loc_laps`` more,
-    and write OUT (``metrics.json``, ``state.npz``, and the figures when ``plots``).
+    data: str, out: str | Path, options: MBARAMTourOptions | None = None
+) -> MBARAMTourResult:
+    """Map ``options.laps`` laps of the simulated tour ``data``, localise on
+    ``options.loc_laps`` more, and write OUT (``metrics.json``, ``state.npz``, and the
+    figures when ``options.plots``).
 
     Args:
         data: the simulator spec ``sim:NAME[/SESSION][?key=value]``.
         out: the output folder.
-        odometry: ``groundtruth`` or ``integrated`` (the odometry channel's source).
-        preset: a key of :data:`PRESETS`; ``overrides`` are MBARAM parameters over it.
-        progress: a labelled progress bar per lap (lap k/N, frames).
-        mapper: the range-sensor mapper (a name in ``registry.RANGE_MAPPERS``).
+        options: how to map and localise (default :class:`MBARAMTourOptions`).
 
     Returns:
-        The :func:`~torchratslam.mbaram.model.run_mbaram` result and the metrics written.
+        The :func:`~torchratslam.mbaram.run.run_mbaram` result and the metrics written.
 
     Raises:
         ConfigError: bad lap counts or parameters.
@@ -173,47 +239,53 @@ def run_experiment(
     """
     import torch
 
-    from torchratslam.mbaram.model import MBARAMParams, run_mbaram
+    from torchratslam.mbaram.params import MBARAMParams
+    from torchratslam.mbaram.run import run_mbaram
 
-    _check(data, laps, loc_laps)
-    params = MBARAMParams.from_dict({**PRESETS[preset], **(overrides or {})})
+    o = options or MBARAMTourOptions()
+    _check(data, o.laps, o.loc_laps)
+    params = MBARAMParams.from_dict({**PRESETS[o.preset], **(o.overrides or {})})
     torch.set_num_threads(1)
     session = sim_session(
-        data, laps=laps + loc_laps, seed=seed, moving=moving_obstacles, moved=moved_obstacles
+        data,
+        laps=o.laps + o.loc_laps,
+        seed=o.seed,
+        moving=o.moving_obstacles,
+        moved=o.moved_obstacles,
     )
     if not session.lasers:
         raise InputError(f"{data}: the session has no lasers; add ?lasers=true")
-    map_r, loc_r = split_laps(np.asarray(session.laps), laps, loc_laps)
+    map_r, loc_r = split_laps(np.asarray(session.laps), o.laps, o.loc_laps)
     result = run_mbaram(
-        _with_progress(session, map_r, "mapping lap", not progress),
-        _with_progress(session, loc_r, "localisation lap", not progress),
+        _with_progress(session, map_r, "mapping lap", not o.progress),
+        _with_progress(session, loc_r, "localisation lap", not o.progress),
         params,
-        odometry=odometry,
-        mapper=mapper,
+        odometry=o.odometry,
+        mapper=o.mapper,
     )
-    metrics = {
-        **result.metrics,
-        "data": data,
-        "seed": seed,
-        "moving_obstacles": moving_obstacles,
-        "moved_obstacles": moved_obstacles,
-        "preset": preset,
-        "laps": len(map_r),
-        "loc_laps": len(loc_r),
-        "paper": PAPER,
-    }
+    metrics = MBARAMTourMetrics(
+        mapper=dict(result.metrics),
+        data=data,
+        seed=o.seed,
+        moving_obstacles=o.moving_obstacles,
+        moved_obstacles=o.moved_obstacles,
+        preset=o.preset,
+        laps=len(map_r),
+        loc_laps=len(loc_r),
+        paper=PAPER,
+    )
     out = Path(out)
     _write_outputs(result, metrics, out)
-    if plots:
+    if o.plots:
         from torchratslam.viz.mbaram import plot_results
 
         plot_results(result, session, out, paper=PAPER)
-    return result, metrics
+    return MBARAMTourResult(run=result, metrics=metrics)
 
 
-def summary_line(data: str, metrics: dict[str, Any], out: Path) -> str:
+def summary_line(data: str, metrics: MBARAMTourMetrics, out: Path) -> str:
     """The one-line summary the CLI prints."""
-    m = metrics
+    m = metrics.mapper
     return (
         f"MBARAM {data}: {m['nodes']} nodes, {m['edges']} edges, nodes per lap "
         f"{m['nodes_per_lap']}, QE {m['qe']:.3f} ({m['qe_m']:.2f} m), CR {m['cr']:.0f}:1, "

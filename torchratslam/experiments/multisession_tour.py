@@ -6,8 +6,11 @@ demo.
   previous ones left, merging when they meet (:class:`MultiSessionRatSLAM`);
 * :func:`run_tour` runs the single-session references and the multisession mapping of a
   tour and compares them (the ``report`` of ``report.json``);
-* :func:`report_markdown` renders the report as tables;
-* :func:`run_experiment` does all of it for a tour name and writes ``OUT``.
+* :func:`run_experiment` does all of it for a tour name and writes ``OUT``, with the
+  options of :class:`MultisessionOptions`.
+
+The report's tables are :mod:`torchratslam.experiments.multisession_report`; the check
+across seeds is :mod:`torchratslam.experiments.multisession_seeds`.
 """
 
 from __future__ import annotations
@@ -15,17 +18,18 @@ from __future__ import annotations
 import dataclasses
 import json
 import time
-from collections.abc import Callable, Iterable
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from torchratslam.config import RatSLAMConfig, load_config
-from torchratslam.eval.icp import PAPER_ICP_MSE_M2
 from ratslam_graph.atomic import atomic_write_text
-from ratslam_graph.errors import InputError
+from torchratslam.config import RatSLAMConfig, load_config
+from torchratslam.errors import InputError
+from torchratslam.eval.icp import PAPER_ICP_MSE_M2
+from torchratslam.experiments.multisession_report import report_markdown
 from torchratslam.maps.state import MapState
 from torchratslam.multisession.session import MultiSessionRatSLAM
 from torchratslam.pipeline import RatSLAM
@@ -33,22 +37,19 @@ from torchratslam.protocols import FrameSource
 
 __all__ = [
     "PAPER_ICP_RMSE",
-    "RECOMMENDED_MERGE_OPTIONS",
-    "RECOMMENDED_SESSION_OPTIONS",
     "TOUR_CONFIG",
+    "MultisessionOptions",
     "parse_tour_spec",
-    "partial_experiences",
-    "place_counts",
-    "report_markdown",
+    "relative",
     "run_experiment",
     "run_sessions",
     "run_tour",
-    "seed_row",
-    "seed_table",
-    "seed_table_markdown",
+    "single_run",
+    "tour_clock",
+    "tour_setup",
 ]
 
-PAPER_ICP_RMSE = PAPER_ICP_MSE_M2  # old name: the paper prints "RMSE", but its figures are
+PAPER_ICP_RMSE = PAPER_ICP_MSE_M2  # the paper prints "RMSE", but its figures are
 # LibICP residuals, mean squared distances in m^2 (torchratslam.eval.icp)
 """ICP RMSE between the multisession and single-session maps in the paper (Figs. 10, 14,
 16; units as printed there)."""
@@ -93,7 +94,7 @@ def _map_metrics(state: MapState, gt: np.ndarray | None) -> dict[str, Any]:
 
 def _posegraph(state: MapState, config: RatSLAMConfig) -> Any:
     from ratslam_graph.experience_map import ExperienceMap
-    from torchratslam.maps.state import experience_map_state
+    from torchratslam.maps.stages import experience_map_state
 
     em = ExperienceMap(config.experience_map)
     em.set_state(experience_map_state(state))
@@ -107,7 +108,8 @@ def _graph_error(state: MapState, config: RatSLAMConfig) -> float:
     return float(GraphErrorEvaluator(pg)(pg.poses)) if pg.num_edges else 0.0
 
 
-def _relative(n: int, ref: int) -> float | None:
+def relative(n: int, ref: int) -> float | None:
+    """``n / ref - 1`` (None when ``ref`` is 0)."""
     return (n - ref) / ref if ref else None
 
 
@@ -146,7 +148,7 @@ def run_sessions(
         each session), ``sessions`` (per-session counts), ``relax_s`` (experience-map
         time, s), ``wall_s``.
     """
-    from torchratslam.maps.state import load_map, save_map
+    from torchratslam.maps.native import load_map, save_map
 
     stored: list[MapState] = []
     names: list[str] = []
@@ -219,7 +221,7 @@ class _Clock:
     offsets: list[float]
 
 
-def _clock(tour: Any) -> _Clock:
+def tour_clock(tour: Any) -> _Clock:
     """Put every session on the continuous run's clock (one ground truth for all maps);
     a single-session tour, or one without roads between sessions, uses the
     concatenation."""
@@ -235,11 +237,11 @@ def _clock(tour: Any) -> _Clock:
     return _Clock(cont, full, starts, cont.groundtruth(), offsets)
 
 
-def _single_run(
+def single_run(
     config: RatSLAMConfig, frames: Any, n: int | None, progress: bool, **ratslam_kwargs: Any
 ) -> tuple[MapState, float]:
     """One single-session map over ``frames`` and its wall time (s)."""
-    from torchratslam.maps.state import state_from_slam
+    from torchratslam.maps.running import state_from_slam
 
     t0 = time.perf_counter()
     slam = RatSLAM(config, **ratslam_kwargs)
@@ -346,7 +348,7 @@ def _comparison(
         ("_concatenated", "single_concatenated"),
         ("_last_session", "single_last_session"),
     ):
-        report[f"experiences_difference_relative{suffix}"] = _relative(
+        report[f"experiences_difference_relative{suffix}"] = relative(
             n_m, report[key]["experiences"]
         )
     return report, {"icp": ic, "libicp": lib}
@@ -356,8 +358,8 @@ def _relax_rows(
     state: MapState, gt: np.ndarray, config: RatSLAMConfig, backends: list[str]
 ) -> dict[str, Any] | None:
     """Each backend relaxing ``state``'s graph once (None when it has no links)."""
-    from torchratslam.eval.metrics import interpolate_groundtruth
     from ratslam_graph.compare import compare_backends
+    from torchratslam.eval.metrics import interpolate_groundtruth
 
     pg = _posegraph(state, config)
     if pg.num_edges == 0:
@@ -451,7 +453,7 @@ def run_tour(
         ``report`` (JSON-able: the keys of ``OUT/report.json``) and ``data`` (the maps,
         snapshots and ground truth for figures).
     """
-    clock = _clock(tour)
+    clock = tour_clock(tour)
     limit = None if max_frames is None else max_frames * len(tour.sessions)
     kw = dict(progress=progress, max_frames=max_frames, **ratslam_kwargs)
     if merge_options:
@@ -459,11 +461,11 @@ def run_tour(
     kw.update(session_options or {})
     last_frames = _shifted(tour.sessions[-1].frames(), clock.offsets[-1])
     singles = {  # the paper's single session; the concatenation; the last session alone
-        "single": _single_run(config, clock.cont.frames(), limit, progress, **ratslam_kwargs),
-        "single_concatenated": _single_run(
+        "single": single_run(config, clock.cont.frames(), limit, progress, **ratslam_kwargs),
+        "single_concatenated": single_run(
             config, clock.full.frames(), limit, progress, **ratslam_kwargs
         ),
-        "single_last_session": _single_run(
+        "single_last_session": single_run(
             config, last_frames, max_frames, progress, **ratslam_kwargs
         ),
     }
@@ -501,107 +503,6 @@ def run_tour(
     return {"report": report, "data": data}
 
 
-# ------------------------------------------------------------------ the report
-def _fmt(v: Any, spec: str = ".4g") -> str:
-    return "-" if v is None else format(v, spec)
-
-
-def _runs_table(report: dict[str, Any]) -> list[str]:
-    last = report["sessions"][-1]
-    rows = [
-        ("single session, continuous (the paper's single mapping session)", report["single"]),
-        (
-            "single session, sessions concatenated (kidnapped between them)",
-            report["single_concatenated"],
-        ),
-        (f"single session, {last} alone", report["single_last_session"]),
-        ("multisession", report["multi"]),
-    ]
-    if report.get("single_kind") == "concatenated":  # a tour without roads between sessions
-        rows = [(name, r) for name, r in rows if r is not report["single_concatenated"]]
-    if "ablation_no_pc_shift" in report:
-        rows.append(("multisession, no pose-cell shift", report["ablation_no_pc_shift"]))
-    lines = [
-        f"### {report['tour']}: {len(report['sessions'])} sessions, {report['frames']} frames "
-        f"({report['frames_continuous']} in the continuous run)",
-        "",
-        "| run | templates | experiences | links | ATE (m) | maps at end |",
-        "|---|---|---|---|---|---|",
-    ]
-    for name, r in rows:
-        lines.append(
-            f"| {name} | {r['templates']} | {r['experiences']} | {r['links']} | "
-            f"{_fmt(r['ate_rmse_m'])} | {r.get('maps', 1)} |"
-        )
-    return lines
-
-
-def _summary_lines(report: dict[str, Any]) -> list[str]:
-    last = report["sessions"][-1]
-    return [
-        "",
-        f"- ICP, the paper's figure (LibICP residual: mean squared nearest-neighbour "
-        f"distance, single-session map fixed, multisession moved): "
-        f"{_fmt(report.get('icp_libicp_mse_m2'))} m^2; the paper reports "
-        f"{_fmt(report.get('paper_icp_mse_m2'))} m^2",
-        f"- ICP RMSE (the project's figure, not the paper's) multisession vs single-session "
-        f"(continuous) map: "
-        f"{_fmt(report['icp_rmse'])} m ({_fmt(report['icp_rmse_relative'])} of the tour's "
-        f"{report['tour_extent_m']:.1f} m extent); vs the concatenated run: "
-        f"{_fmt(report['icp_rmse_concatenated'])} m; vs {last} alone: "
-        f"{_fmt(report['icp_rmse_last_session'])} m",
-        "- experiences, multi vs single (continuous): "
-        + _fmt(report["experiences_difference_relative"], "+.1%")
-        + ", vs concatenated: "
-        + _fmt(report["experiences_difference_relative_concatenated"], "+.1%")
-        + f", vs {last} alone: "
-        + _fmt(report["experiences_difference_relative_last_session"], "+.1%"),
-        "- merges: "
-        + (
-            ", ".join(
-                f"{m['session']} frame {m['frame']} with {m['map']}" for m in report["merges"]
-            )
-            or "none"
-        ),
-    ]
-
-
-def _backend_lines(report: dict[str, Any]) -> list[str]:
-    if "backends" not in report:
-        return []
-    lines = [
-        "",
-        "| backend (whole multisession run) | graph error | ATE (m) | "
-        "relaxation time (s) | experiences |",
-        "|---|---|---|---|---|",
-    ]
-    for name, b in report["backends"].items():
-        lines.append(
-            f"| {name} | {_fmt(b['error'])} | {_fmt(b['ate_rmse_m'])} | "
-            f"{_fmt(b['time_s'], '.3f')} | {b['experiences']} |"
-        )
-    if "backends_final_map" in report:
-        lines += [
-            "",
-            "relaxing the final multisession map's graph once more:",
-            "",
-            "| backend | initial error | error after | ATE (m) | time (s) |",
-            "|---|---|---|---|---|",
-        ]
-        for name, r in report["backends_final_map"].items():
-            lines.append(
-                f"| {name} | {_fmt(r['initial_error'])} | {_fmt(r['error'])} | "
-                f"{_fmt(r['ate_rmse_m'])} | {_fmt(r['time_s'], '.3f')} |"
-            )
-    return lines
-
-
-def report_markdown(report: dict[str, Any]) -> str:
-    """The report as Markdown tables (what the demo prints and the README shows)."""
-    lines = _runs_table(report) + _summary_lines(report) + _backend_lines(report)
-    return "\n".join(lines) + "\n"
-
-
 # ------------------------------------------------------------------ the experiment
 def parse_tour_spec(spec: str) -> tuple[str, dict[str, Any]]:
     """The tour and its options of a ``sim:NAME[?key=value&...]`` spec (the simulator's
@@ -621,7 +522,7 @@ def parse_tour_spec(spec: str) -> tuple[str, dict[str, Any]]:
     return name, options
 
 
-def _tour_setup(
+def tour_setup(
     tour_spec: str, config: Any, overrides: dict[str, Any] | None
 ) -> tuple[str, dict[str, Any], RatSLAMConfig]:
     """The tour name and options of ``tour_spec`` and the config: ``config`` (a
@@ -642,24 +543,47 @@ def _write_json(path: Path, obj: Any) -> None:
     atomic_write_text(path, text)
 
 
+@dataclass(frozen=True)
+class MultisessionOptions:
+    """Options of :func:`run_experiment`.
+
+    Attributes:
+        ablation: also run without the pose-cell shift (Fig. 12).
+        backends: relaxation backends to compare on the final map.
+        seed: the simulator's seed.
+        max_frames: frames per session at most (quick checks).
+        figures: write the figures.
+        progress: progress bars.
+        overrides: flat config keys replaced last.
+        merge_options: ``merge_maps`` options (default: the authors' code).
+        rerun: watch the multisession mapping live in a rerun viewer
+            (:class:`torchratslam.viz.rerun_viewer.RerunObserver`; extra ``viewer``).
+        rerun_save: record the multisession mapping for rerun into this ``.rrd`` file.
+        merge_threshold: :class:`MultiSessionRatSLAM` ``merge_threshold`` (None: the paper's).
+        merge_persist: :class:`MultiSessionRatSLAM` ``merge_persist`` (1: the paper's).
+        merge_absorb: :class:`MultiSessionRatSLAM` ``merge_absorb`` (False: the paper's).
+    """
+
+    ablation: bool = False
+    backends: tuple[str, ...] = ()
+    seed: int = 0
+    max_frames: int | None = None
+    figures: bool = True
+    progress: bool = False
+    overrides: Mapping[str, Any] | None = None
+    merge_options: Mapping[str, Any] | None = None
+    rerun: bool = False
+    rerun_save: str | Path | None = None
+    merge_threshold: float | None = None
+    merge_persist: int = 1
+    merge_absorb: bool = False
+
+
 def run_experiment(
     config: Any,
     tour_spec: str,
     out: str | Path,
-    *,
-    ablation: bool = False,
-    backends: tuple[str, ...] = (),
-    seed: int = 0,
-    max_frames: int | None = None,
-    figures: bool = True,
-    progress: bool = False,
-    overrides: dict[str, Any] | None = None,
-    merge_options: dict[str, Any] | None = None,
-    rerun: bool = False,
-    rerun_save: str | Path | None = None,
-    merge_threshold: float | None = None,
-    merge_persist: int = 1,
-    merge_absorb: bool = False,
+    options: MultisessionOptions | None = None,
 ) -> dict[str, Any]:
     """Run the experiment on a tour and write OUT (what the CLI and the demo call):
     ``report.json``, ``report.md``, the figures and the session maps.
@@ -670,14 +594,7 @@ def run_experiment(
         tour_spec: ``sim:NAME``, optionally with the simulator's options
             (``sim:NAME?key=value&...``, :func:`parse_tour_spec`).
         out: the output folder.
-        overrides: flat config keys replaced last.
-        merge_options: ``merge_maps`` options (default: the authors' code).
-        rerun: watch the multisession mapping live in a rerun viewer
-            (:class:`torchratslam.viz.rerun_viewer.RerunObserver`; extra ``viewer``).
-        rerun_save: record the multisession mapping for rerun into this ``.rrd`` file.
-        merge_threshold: :class:`MultiSessionRatSLAM` ``merge_threshold`` (None: the paper's).
-        merge_persist: :class:`MultiSessionRatSLAM` ``merge_persist`` (1: the paper's).
-        merge_absorb: :class:`MultiSessionRatSLAM` ``merge_absorb`` (False: the paper's).
+        options: the run's options (default: :class:`MultisessionOptions`).
 
     Returns:
         :func:`run_tour`'s result (``report`` and ``data``).
@@ -685,32 +602,35 @@ def run_experiment(
     from torchratslam.sim import get_tour
     from torchratslam.viz.multisession import write_figures
 
-    name, tour_options, config = _tour_setup(tour_spec, config, overrides)
-    tour = get_tour(name, seed=seed, **tour_options)
+    o = options if options is not None else MultisessionOptions()
+    overrides = dict(o.overrides) if o.overrides is not None else None
+    merge_options = dict(o.merge_options) if o.merge_options is not None else None
+    name, tour_options, config = tour_setup(tour_spec, config, overrides)
+    tour = get_tour(name, seed=o.seed, **tour_options)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     observer = None
-    if rerun or rerun_save:
+    if o.rerun or o.rerun_save:
         from torchratslam.viz.rerun_viewer import RerunObserver
 
-        observer = RerunObserver(None, spawn=rerun, save=rerun_save)
+        observer = RerunObserver(None, spawn=o.rerun, save=o.rerun_save)
     try:
         result = run_tour(
             config,
             tour,
-            ablation=ablation,
-            backends=tuple(backends),
+            ablation=o.ablation,
+            backends=tuple(o.backends),
             save_dir=out,
-            progress=progress,
-            max_frames=max_frames,
+            progress=o.progress,
+            max_frames=o.max_frames,
             merge_options=merge_options,
             observer=observer,
             session_options={
                 k: v
                 for k, v in (
-                    ("merge_threshold", merge_threshold),
-                    ("merge_persist", merge_persist),
-                    ("merge_absorb", merge_absorb),
+                    ("merge_threshold", o.merge_threshold),
+                    ("merge_persist", o.merge_persist),
+                    ("merge_absorb", o.merge_absorb),
                 )
                 if v != {"merge_threshold": None, "merge_persist": 1, "merge_absorb": False}[k]
             },
@@ -719,355 +639,13 @@ def run_experiment(
         if observer is not None:
             observer.close()
     report = result["report"]
-    report["seed"] = seed
+    report["seed"] = o.seed
     if tour_options:
         report["tour_options"] = tour_options
     report["config"] = config.to_flat()
     _write_json(out / "report.json", report)
     atomic_write_text(out / "report.md", report_markdown(report))
-    if figures:
+    if o.figures:
         report["figures"] = [p.name for p in write_figures(result, out)]
         _write_json(out / "report.json", report)
     return result
-
-
-# ------------------------------------------------------------------ across seeds
-SEED_TOLERANCE = 0.02
-"""Issue 18: the merged map's experience count within 2% of the continuous run's."""
-ABLATION_MARGIN = 0.10
-"""Issue 18: without the pose-cell shift at least 10% more experiences."""
-WRONG_PLACE_M = 1.0
-"""A merge whose two matched experiences lie further apart (ground truth) is wrong."""
-RECOMMENDED_MERGE_OPTIONS: dict[str, Any] = {"pc_shift_rotate": True}
-"""Issue 18: the ``merge_maps`` options recommended for merges that hold across seeds
-(docs/multisession.md, "Across seeds"); each is a named deviation from the paper."""
-RECOMMENDED_SESSION_OPTIONS: dict[str, Any] = {"merge_persist": 2, "merge_absorb": True}
-"""Issue 18: the :class:`MultiSessionRatSLAM` options recommended with
-:data:`RECOMMENDED_MERGE_OPTIONS` (a match confirmed by the next new template, the
-first matching template identified with its stored match)."""
-
-
-def _gt_at(gt: np.ndarray, t: float) -> np.ndarray:
-    """Ground-truth ``(x, y)`` at the row nearest time ``t``. Shape: gt ``(T, 4)``."""
-    return np.asarray(gt[int(np.argmin(np.abs(gt[:, 0] - t))), 1:3], np.float64)
-
-
-def merge_distances(merges: list[dict[str, Any]], gt: np.ndarray) -> list[float]:
-    """Ground-truth distance (m) between the two experiences matched by each merge.
-
-    Shape:
-        gt: ``(T, 4)`` rows ``[t, x, y, th]`` on the merges' clock.
-    """
-    out = []
-    for m in merges:
-        a, b = m.get("loaded_exp_t"), m.get("partial_exp_t")
-        if a is None or b is None or not (np.isfinite(a) and np.isfinite(b)):
-            out.append(float("nan"))
-            continue
-        out.append(float(np.linalg.norm(_gt_at(gt, a) - _gt_at(gt, b))))
-    return out
-
-
-PLACE_HEADING_DEG = 20.0
-""":func:`place_counts`: two experiences are at one place when their headings (ground
-truth) differ by at most this much (and their positions by half the median spacing)."""
-
-
-def place_counts(
-    state: MapState, gt: np.ndarray, session_frames: np.ndarray | None = None
-) -> dict[str, Any]:
-    """How many of a map's experiences are distinct places, in ground truth (a diagnostic
-    of the per-seed table: which experiences are repeats, which lie where no session
-    looks).
-
-    An experience *repeats* an earlier one (creation time) when their ground-truth
-    positions are within half the median distance between experiences consecutive in
-    creation, and their headings within :data:`PLACE_HEADING_DEG`; ``places`` counts
-    the rest. With ``session_frames`` (rows of ``gt`` the sessions drive), an
-    experience is *unseen* when no session frame has its position and heading within
-    the same bounds (a view only the continuous run's drives between sessions see).
-
-    Shape:
-        gt: ``(T, 4)`` rows ``[t, x, y, th]`` on the map's clock; session_frames: ``(F,)``.
-
-    Returns:
-        ``experiences``, ``repeats``, ``places``, ``radius_m``, and with
-        ``session_frames``: ``unseen``, ``places_seen`` (places the sessions see).
-    """
-    from ratslam_graph.geometry import wrap_angle
-
-    n = state.n_experiences
-    out: dict[str, Any] = {"experiences": n, "repeats": 0, "places": n, "radius_m": 0.0}
-    if n == 0:
-        return out
-    idx = np.argmin(np.abs(gt[:, 0][None, :] - state.exp_t[:, None]), axis=1)
-    p, h = gt[idx, 1:3], gt[idx, 3]
-    order = np.argsort(state.exp_t, kind="stable")
-    steps = np.linalg.norm(np.diff(p[order], axis=0), axis=1)
-    r = 0.5 * float(np.median(steps)) if steps.size else 0.0
-    hmax = np.radians(PLACE_HEADING_DEG)
-
-    def near(q: np.ndarray, hq: np.ndarray) -> np.ndarray:
-        d = np.linalg.norm(p[:, None, :] - q[None, :, :], axis=2)
-        dh = np.abs(wrap_angle(h[:, None] - hq[None, :]))
-        return (d <= r) & (dh <= hmax)
-
-    rank = np.empty(n, np.int64)
-    rank[order] = np.arange(n)
-    repeat = (near(p, h) & (rank[None, :] < rank[:, None])).any(axis=1)
-    out.update(repeats=int(repeat.sum()), places=int((~repeat).sum()), radius_m=r)
-    if session_frames is not None:
-        f = np.asarray(session_frames, np.int64)
-        seen = near(gt[f, 1:3], gt[f, 3]).any(axis=1)
-        out.update(unseen=int((~seen).sum()), places_seen=int((~repeat & seen).sum()))
-    return out
-
-
-def partial_experiences(merges: list[dict[str, Any]]) -> int:
-    """The partial maps' experiences that merges brought into the stored maps, each once.
-
-    They are the only experiences whose pose-cell associations the shift moves, so the
-    ablation without it can re-make at most these (measured: never more on the virtual
-    tour's seeds 0-19). A merge brings its partial map's experiences but the matched
-    ``e_z``; within a session the running map at a later merge holds the earlier
-    merges' partial maps (and the stored maps merged since), so a session counts at its
-    last merge.
-
-    Args:
-        merges: :attr:`MultiSessionRatSLAM.merges` records (``session``,
-            ``partial_experiences``), in order.
-    """
-    last = {m["session"]: m for m in merges}
-    return int(sum(max(int(m.get("partial_experiences", 0)) - 1, 0) for m in last.values()))
-
-
-def seed_row(
-    config: RatSLAMConfig,
-    tour: Any,
-    *,
-    ablation: bool = True,
-    max_frames: int | None = None,
-    merge_options: dict[str, Any] | None = None,
-    **session_kwargs: Any,
-) -> dict[str, Any]:
-    """One seed of the per-seed check: the continuous single-session run, the
-    multisession run and (``ablation``) the multisession run without the pose-cell shift.
-
-    Args:
-        config: the configuration.
-        tour: the simulated tour of this seed.
-        ablation: also run without the pose-cell shift.
-        max_frames: frames per session at most (quick checks).
-        merge_options: ``merge_maps`` options.
-        **session_kwargs: :class:`MultiSessionRatSLAM` options (``merge_threshold``,
-            ``merge_persist``, ``merge_absorb``).
-
-    Returns:
-        ``single``, ``multi``, ``ablation`` (experience counts), ``diff`` and
-        ``ablation_diff`` (relative to single), ``partial_experiences`` (the partial
-        maps' experiences the merges brought in, the matched ``e_z`` excluded, each
-        counted once: a session's at its last merge) and ``ablation_ceiling`` (the ablation's
-        difference if it re-made every one of them: ``(multi + partial - single) /
-        single``), ``single_places`` and ``multi_places``
-        (:func:`place_counts`: repeats, distinct places, places the sessions see),
-        ``merges`` (session, frame, ground-truth distance of the matched experiences in
-        m, experiences added), ``wrong_merges``.
-    """
-    clock = _clock(tour)
-    limit = None if max_frames is None else max_frames * len(tour.sessions)
-    kw: dict[str, Any] = dict(max_frames=max_frames, **session_kwargs)
-    if merge_options:
-        kw["merge_options"] = dict(merge_options)
-    single, _ = _single_run(config, clock.cont.frames(), limit, False)
-    multi = run_sessions(config, tour.sessions, offsets=clock.offsets, **kw)
-    n_s, n_m = single.n_experiences, multi["maps"][-1].n_experiences
-    partial = partial_experiences(multi["merges"])
-    dist = merge_distances(multi["merges"], clock.gt)
-    frames = np.concatenate(
-        [np.arange(a, min(a + len(t), len(clock.gt))) for a, t in zip(clock.starts, tour.sessions)]
-    )
-    row: dict[str, Any] = {
-        "single": int(n_s),
-        "multi": int(n_m),
-        "single_places": place_counts(single, clock.gt, frames),
-        "multi_places": place_counts(multi["maps"][-1], clock.gt, frames),
-        "maps": len(multi["maps"]),
-        "diff": _relative(n_m, n_s),
-        "partial_experiences": int(partial),
-        "ablation_ceiling": _relative(n_m + partial, n_s),
-        "merges": [
-            {
-                "session": m["session"],
-                "frame": m["frame"],
-                "error": m["error"],
-                "distance_m": d,
-                "experiences_added": m.get("experiences_added"),
-                "partial_experiences": m.get("partial_experiences"),
-            }
-            for m, d in zip(multi["merges"], dist)
-        ],
-        "wrong_merges": int(sum(1 for d in dist if not d <= WRONG_PLACE_M)),
-    }
-    if ablation:
-        abl = run_sessions(
-            config, tour.sessions, offsets=clock.offsets, shift_pose_cells=False, **kw
-        )
-        n_a = abl["maps"][-1].n_experiences
-        row.update(ablation=int(n_a), ablation_diff=_relative(n_a, n_s))
-    return row
-
-
-def seed_table(
-    tour_spec: str,
-    seeds: Iterable[int],
-    *,
-    config: Any = None,
-    ablation: bool = True,
-    max_frames: int | None = None,
-    overrides: dict[str, Any] | None = None,
-    merge_options: dict[str, Any] | None = None,
-    on_row: Any = None,
-    **session_kwargs: Any,
-) -> dict[str, Any]:
-    """The per-seed check of issue 18 on a simulated tour.
-
-    Args:
-        tour_spec: ``sim:NAME``, optionally with the simulator's options
-            (``sim:NAME?key=value&...``, :func:`parse_tour_spec`).
-        seeds: simulator seeds.
-        config: config, path/name, or None for the tour's shipped config, unmodified.
-        ablation: also run without the pose-cell shift.
-        max_frames: frames per session at most.
-        overrides: flat config keys replaced last.
-        merge_options: ``merge_maps`` options.
-        on_row: called with ``(seed, row)`` after each seed (progress).
-        **session_kwargs: :class:`MultiSessionRatSLAM` options.
-
-    Returns:
-        ``tour``, ``rows`` (seed -> :func:`seed_row`), and the summary: ``within``
-        (seeds within :data:`SEED_TOLERANCE`), ``within_one`` (seeds whose counts differ
-        by at most one experience), ``ablation_above`` (seeds whose ablation is at
-        least :data:`ABLATION_MARGIN` above), ``ablation_reachable`` (seeds whose
-        ``ablation_ceiling`` reaches it), ``wrong_merges``, ``seeds``.
-    """
-    from torchratslam.sim import get_tour
-
-    name, tour_options, config = _tour_setup(tour_spec, config, overrides)
-    rows: dict[int, dict[str, Any]] = {}
-    for seed in seeds:
-        row = seed_row(
-            config,
-            get_tour(name, seed=int(seed), **tour_options),
-            ablation=ablation,
-            max_frames=max_frames,
-            merge_options=merge_options,
-            **session_kwargs,
-        )
-        rows[int(seed)] = row
-        if on_row is not None:
-            on_row(int(seed), row)
-    diffs = [r["diff"] for r in rows.values()]
-    out: dict[str, Any] = {
-        "tour": name,
-        "seeds": list(rows),
-        "rows": rows,
-        "within": int(sum(1 for d in diffs if d is not None and abs(d) <= SEED_TOLERANCE)),
-        "within_one": int(sum(1 for r in rows.values() if abs(r["multi"] - r["single"]) <= 1)),
-        "wrong_merges": int(sum(r["wrong_merges"] for r in rows.values())),
-        "options": {**session_kwargs, **(merge_options or {})},
-    }
-    if tour_options:
-        out["tour_options"] = tour_options
-    if ablation:
-        out["ablation_above"] = int(
-            sum(
-                1
-                for r in rows.values()
-                if r["ablation_diff"] is not None and r["ablation_diff"] >= ABLATION_MARGIN
-            )
-        )
-        out["ablation_reachable"] = int(
-            sum(
-                1
-                for r in rows.values()
-                if r["ablation_ceiling"] is not None and r["ablation_ceiling"] >= ABLATION_MARGIN
-            )
-        )
-    return out
-
-
-def seed_table_markdown(table: dict[str, Any]) -> str:
-    """The per-seed table as Markdown (experiences: multisession / single, ablation)."""
-    seeds = table["seeds"]
-    rows = table["rows"]
-
-    def line(label: str, cell: Callable[[dict[str, Any]], str]) -> str:
-        return f"| {label} | " + " | ".join(cell(rows[s]) for s in seeds) + " |"
-
-    lines = [
-        f"### {table['tour']}: experiences per seed",
-        "",
-        "| seed | " + " | ".join(str(s) for s in seeds) + " |",
-        "|---|" + "---|" * len(seeds),
-        line("multi / single", lambda r: f"{r['multi']}/{r['single']}"),
-        line("difference", lambda r: _fmt(r["diff"], "+.2%")),
-    ]
-    if "ablation_above" in table:
-        lines.append(
-            line(
-                "ablation (no pose-cell shift)",
-                lambda r: f"{r['ablation']} ({_fmt(r['ablation_diff'], '+.1%')})",
-            )
-        )
-    if all("ablation_ceiling" in rows[s] for s in seeds):
-        lines.append(
-            line(
-                "partial experiences merged (ablation ceiling)",
-                lambda r: f"{r['partial_experiences']} ({_fmt(r['ablation_ceiling'], '+.1%')})",
-            )
-        )
-    if all("single_places" in rows[s] for s in seeds):
-        lines.append(
-            line(
-                "places multi / single (seen by the sessions)",
-                lambda r: f"{r['multi_places']['places_seen']}/{r['single_places']['places_seen']}",
-            )
-        )
-        lines.append(
-            line(
-                "single: repeats, unseen",
-                lambda r: f"{r['single_places']['repeats']}, {r['single_places']['unseen']}",
-            )
-        )
-    lines.append(
-        line(
-            "merge distance (m)",
-            lambda r: ", ".join(_fmt(m["distance_m"], ".2f") for m in r["merges"]) or "none",
-        )
-    )
-    n = len(seeds)
-    lines += [
-        "",
-        f"- within {SEED_TOLERANCE:.0%} of the continuous single session: "
-        f"{table['within']}/{n} seeds",
-    ]
-    if "within_one" in table:
-        lines.append(f"- within one experience: {table['within_one']}/{n} seeds")
-    if "ablation_above" in table:
-        lines.append(
-            f"- ablation at least {ABLATION_MARGIN:.0%} above: {table['ablation_above']}/{n} seeds"
-        )
-    if "ablation_reachable" in table:
-        lines.append(
-            f"- ablation ceiling at least {ABLATION_MARGIN:.0%} above (the partial map large "
-            f"enough for it): {table['ablation_reachable']}/{n} seeds"
-        )
-    lines.append(
-        f"- merges at a wrong place (matched experiences > {WRONG_PLACE_M:g} m apart): "
-        f"{table['wrong_merges']}"
-    )
-    if table.get("options"):
-        lines.append(f"- options: {table['options']}")
-    if table.get("tour_options"):
-        lines.append(f"- tour options: {table['tour_options']}")
-    return "\n".join(lines) + "\n"

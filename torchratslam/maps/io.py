@@ -1,11 +1,11 @@
 """Loading a map in any supported format: one entry point for every command.
 
 * a native saved map (``state.json`` + ``state.npz``) or a run's OUT directory
-  (``OUT/state/``): :func:`torchratslam.maps.state.load_state`;
+  (``OUT/state/``): :func:`torchratslam.maps.native.load_state`;
 * a save of the multisession paper's implementation (``experiences.txt`` and friends):
   :func:`torchratslam.maps.reference_format.read_reference`.
 
-This module sits above both (``state`` never imports ``reference_format``).
+This module sits above both (``native`` never imports ``reference_format``).
 
 Example:
     >>> from torchratslam.maps.io import load_state, map_format  # doctest: +SKIP
@@ -20,8 +20,9 @@ from typing import Any
 
 import numpy as np
 
-from ratslam_graph.errors import InputError, MapFormatError
-from torchratslam.maps import state as _state
+from torchratslam.errors import InputError, MapFormatError
+from torchratslam.maps import native
+from torchratslam.maps.compat import check_compatible
 from torchratslam.maps.reference_format import (
     EXP_EXTRAS,
     TAIL,
@@ -29,6 +30,7 @@ from torchratslam.maps.reference_format import (
     read_reference,
     write_reference,
 )
+from torchratslam.maps.state import MISSING_KEY, MapState
 
 __all__ = ["convert_map", "load_state", "map_format", "reference_losses"]
 
@@ -39,14 +41,14 @@ def map_format(path: str | Path) -> str | None:
     p = Path(path)
     if not p.is_dir():
         return None
-    if (p / _state.STATE_JSON).is_file() or (p / "state" / _state.STATE_JSON).is_file():
+    if (p / native.STATE_JSON).is_file() or (p / "state" / native.STATE_JSON).is_file():
         return "native"
     if is_reference_map(p):
         return "reference"
     return None
 
 
-def load_state(path: str | Path, config: Any = None) -> _state.MapState:
+def load_state(path: str | Path, config: Any = None) -> MapState:
     """Load a map from a native saved map, a run's OUT directory, or a reference-format
     save directory.
 
@@ -61,10 +63,10 @@ def load_state(path: str | Path, config: Any = None) -> _state.MapState:
         MapFormatError: the map is corrupt or incompatible with ``config``.
     """
     p = Path(path)
-    _state.recover_save(p)  # a native map an interrupted save left beside its place
+    native.recover_save(p)  # a native map an interrupted save left beside its place
     kind = map_format(p)
     if kind == "native":
-        return _state.load_state(p, config)
+        return native.load_state(p, config)
     if kind is None:
         if not p.exists():
             raise InputError(
@@ -72,13 +74,13 @@ def load_state(path: str | Path, config: Any = None) -> _state.MapState:
                 "directory, or a reference-format map directory"
             )
         raise InputError(
-            f"{p} holds no saved map: expected {_state.STATE_JSON} + {_state.STATE_NPZ}, a "
+            f"{p} holds no saved map: expected {native.STATE_JSON} + {native.STATE_NPZ}, a "
             "state/ subdirectory (a run's OUT dir), or the reference format's "
             "experiences.txt and posecellexperiences.txt"
         )
     state = read_reference(p, config)
     if config is not None:
-        _state.check_compatible(state, config, what=f"map {str(p)!r}")
+        check_compatible(state, config, what=f"map {str(p)!r}")
     state.name = str(p)
     return state
 
@@ -101,10 +103,10 @@ _HELD = (  # MapState fields the reference format holds
 )
 _IDS = ("current_vt", "prev_vt", "current_exp", "prev_exp")
 _REF_EXTRAS = {"ref.goal_list", "exp:pc_template", *(k for k, _ in EXP_EXTRAS)}
-_REF_SCALARS = ("imported_from", _state.MISSING_KEY, TAIL)
+_REF_SCALARS = ("imported_from", MISSING_KEY, TAIL)
 
 
-def reference_losses(state: _state.MapState) -> list[str]:
+def reference_losses(state: MapState) -> list[str]:
     """What of ``state`` the reference format cannot hold (empty: nothing is lost)."""
     out = []
     if state.activity.size:
@@ -131,7 +133,7 @@ def reference_losses(state: _state.MapState) -> list[str]:
     return out
 
 
-def _differences(a: _state.MapState, b: _state.MapState, *, reference: bool) -> list[str]:
+def _differences(a: MapState, b: MapState, *, reference: bool) -> list[str]:
     if not reference:
         return [] if a.equals(b) else ["the native map read back differs from the source"]
     out = []
@@ -194,8 +196,8 @@ def convert_map(
             write_reference(state, work)
             back = read_reference(work, state.config if state.config else config)
         else:
-            _state.save_map(state, work)
-            back = _state.load_map(work)
+            native.save_map(state, work)
+            back = native.load_map(work)
         bad = _differences(state, back, reference=to == "reference")
         if bad:
             raise MapFormatError(

@@ -42,17 +42,10 @@ from typing import Any
 
 import numpy as np
 
-from ratslam_graph.errors import GraphError
 from ratslam_graph.geometry import pc_distance, wrap_angle
-from torchratslam.maps.state import (
-    EM_ACCUM,
-    INT_FIELDS,
-    PC_BEST,
-    PER_ENTITY,
-    MapState,
-    check_compatible,
-    require_templates,
-)
+from torchratslam.errors import GraphError
+from torchratslam.maps.compat import check_compatible, require_templates
+from torchratslam.maps.state import EM_ACCUM, INT_FIELDS, PC_BEST, PER_ENTITY, MapState
 
 __all__ = [
     "EXP_PC_SHIFTS",

@@ -54,7 +54,7 @@ from typing import Any, BinaryIO
 import numpy as np
 
 from ratslam_graph.atomic import write_directory_atomically
-from ratslam_graph.errors import InputError, MapFormatError
+from torchratslam.errors import InputError, MapFormatError
 from torchratslam.maps.state import MISSING_KEY, MapState
 
 __all__ = [

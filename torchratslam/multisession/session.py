@@ -13,7 +13,7 @@ nothing but the robot: mapping continues in that map from the matching experienc
 
 Example:
     >>> from torchratslam.multisession.session import MultiSessionRatSLAM  # doctest: +SKIP
-    >>> from torchratslam.maps.state import load_state  # doctest: +SKIP
+    >>> from torchratslam.maps.native import load_state  # doctest: +SKIP
     >>> slam = MultiSessionRatSLAM(config, [load_state("out/session1")])  # doctest: +SKIP
     >>> slam.run(open_sim("sim:virtual_tour/session2"))  # doctest: +SKIP
     >>> slam.merges  # doctest: +SKIP
@@ -31,16 +31,17 @@ from typing import Any
 import numpy as np
 import torch
 
+from ratslam_graph.protocols import ExperienceMapModule
 from torchratslam.config import RatSLAMConfig
-from ratslam_graph.errors import ConfigError
+from torchratslam.errors import ConfigError
+from torchratslam.maps.compat import conform
 from torchratslam.maps.merge import fuse_templates, merge_maps, pick_experience
-from torchratslam.maps.state import (
-    MapState,
-    apply_state,
-    conform,
-    state_from_slam,
-)
-from torchratslam.pipeline import RatSLAM, RunResult, StepResult
+from torchratslam.maps.running import apply_state, state_from_slam
+from torchratslam.maps.state import MapState
+from torchratslam.messages import SessionState
+from torchratslam.pipeline.ratslam import RatSLAM
+from torchratslam.pipeline.results import RunResult, StepResult
+from torchratslam.protocols import LocalViewModule, OdometrySource, PoseCellModule
 
 __all__ = ["MultiSessionRatSLAM"]
 
@@ -57,7 +58,7 @@ class MultiSessionRatSLAM:
         shift_pose_cells: False skips step (iii) of the merge (the paper's Fig. 12
             ablation: the partial map's pose-cell associations are not shifted).
         names: a name per stored map for reports (default ``"map0"``, ``"map1"``, ...).
-        session: the session's name, recorded in :attr:`merges`.
+        session: the session's name (:attr:`session_name`), recorded in :attr:`merges`.
         keep_snapshots: keep the experience poses before and after each merge in
             :attr:`snapshots` (for figures).
         merge_options: extra arguments of :func:`~torchratslam.maps.merge.merge_maps`
@@ -82,9 +83,12 @@ class MultiSessionRatSLAM:
             ``device``).
 
     Attributes:
-        slam: the running :class:`RatSLAM`; every attribute not defined here
-            (``config``, ``local_view``, ``pose_cells``, ``experience_map``,
-            ``frame_index``, ``timings``, ``trajectory()``, ...) is the slam's.
+        slam: the running :class:`RatSLAM`; ``config``, ``local_view``, ``pose_cells``,
+            ``experience_map``, ``odometry`` and ``session`` (the
+            :class:`~torchratslam.messages.SessionState` record) are the slam's, and so is
+            every other attribute not defined here (``frame_index``, ``timings``,
+            ``trajectory()``, ...).
+        session_name: the session's name.
         merges: one dict per merge: ``frame``, ``map`` (index in ``stored``),
             ``map_name``, ``session``, ``scenario`` ("i": first view, "ii": a partial
             map), ``error``, ``loaded_template``, ``loaded_exp``, ``loaded_exp_t`` and
@@ -139,7 +143,7 @@ class MultiSessionRatSLAM:
             else [s.name or f"map{i}" for i, s in enumerate(self.stored)]
         )
         self.shift_pose_cells = bool(shift_pose_cells)
-        self.session = session
+        self.session_name = session
         self.keep_snapshots = keep_snapshots
         self.merges: list[dict[str, Any]] = []
         self.snapshots: list[dict[str, Any]] = []
@@ -152,9 +156,48 @@ class MultiSessionRatSLAM:
             raise AttributeError(name)
         return getattr(self.slam, name)
 
+    # ------------------------------------------------------------------ the slam's members
+    @property
+    def config(self) -> RatSLAMConfig:
+        """The running slam's configuration."""
+        return self.slam.config
+
+    @property
+    def local_view(self) -> LocalViewModule:
+        """The running slam's local view."""
+        return self.slam.local_view
+
+    @property
+    def pose_cells(self) -> PoseCellModule:
+        """The running slam's pose cells."""
+        return self.slam.pose_cells
+
+    @property
+    def experience_map(self) -> ExperienceMapModule:
+        """The running slam's experience map."""
+        return self.slam.experience_map
+
+    @property
+    def odometry(self) -> OdometrySource:
+        """The running slam's odometry source."""
+        return self.slam.odometry
+
+    @property
+    def session(self) -> SessionState:
+        """The running slam's session record (assigning one restores it)."""
+        return self.slam.session
+
+    @session.setter
+    def session(self, value: SessionState) -> None:
+        self.slam.session = value
+
+    def remap_experiences(self, old_to_new: np.ndarray) -> None:
+        """Re-point the per-frame history at new experience ids (see ``RatSLAM``)."""
+        self.slam.remap_experiences(old_to_new)
+
     def _bank_of(self, state: MapState) -> Any:
         """A local view (same class, params, dtype) holding ``state``'s templates."""
-        lv = self.slam.local_view
+        lv: Any = self.slam.local_view  # a template local view (params, dtype, device)
         bank = type(lv)(lv.params, dtype=lv.dtype, device=lv.device)
         if state.n_templates:
             bank.add_templates(torch.as_tensor(np.asarray(state.templates)))
@@ -290,12 +333,13 @@ class MultiSessionRatSLAM:
         self.slam.experience_map.iterate()
         self.pending.remove(k)
         if self.keep_snapshots:
+            relaxed = self.slam.experience_map.poses
             self.snapshots.append(
                 {
                     "loaded": loaded.exp_pose.copy(),
                     "partial": partial.exp_pose.copy(),
                     "merged": state.exp_pose.copy(),
-                    "relaxed": np.asarray(self.slam.experience_map.poses, np.float64).copy(),
+                    "relaxed": np.asarray(relaxed, np.float64).copy(),
                     "n_loaded": np.array(loaded.n_experiences),
                     "merged_state": state,
                     "partial_state": partial,
@@ -305,7 +349,7 @@ class MultiSessionRatSLAM:
             "frame": int(self.slam.frame_index - 1 if frame is None else frame),
             "map": int(k),
             "map_name": self.names[k],
-            "session": self.session,
+            "session": self.session_name,
             "scenario": "i" if partial.n_templates <= 1 else "ii",
             "error": float(error),
             "loaded_template": int(loaded_template),

@@ -33,7 +33,7 @@ from typing import Any
 import cv2
 import numpy as np
 
-from ratslam_graph.errors import InputError
+from torchratslam.errors import InputError
 from torchratslam.messages import Frame
 from torchratslam.readers.datasets import (
     IRAT_GROUNDTRUTH_TOPIC,

@@ -41,8 +41,8 @@ from typing import Any
 import cv2
 import numpy as np
 
-from ratslam_graph.errors import InputError
 from ratslam_graph.geometry import wrap_angle
+from torchratslam.errors import InputError
 from torchratslam.messages import Frame
 from torchratslam.readers.limits import MAX_SPEED, MAX_TURN_RATE
 

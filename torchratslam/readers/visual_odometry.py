@@ -42,7 +42,7 @@ import torch
 from torch import nn
 
 from torchratslam.config import VisualOdometryParams
-from ratslam_graph.errors import InputError, MapFormatError
+from torchratslam.errors import InputError, MapFormatError
 from torchratslam.messages import Frame
 
 __all__ = ["GivenOdometry", "VisualOdometry", "best_shift", "intensity_profile"]

@@ -16,7 +16,8 @@ from torchratslam.sim.dataset import open_sim, parse_sim_spec, write_dataset
 from torchratslam.sim.laser import Laser, scan
 from torchratslam.sim.motion import OdometryNoise, Route, odometry_from_poses
 from torchratslam.sim.render import Camera, cast_rays, render
-from torchratslam.sim.tours import TOURS, Session, Tour, get_tour
+from torchratslam.sim.session import Session, Tour
+from torchratslam.sim.tours import TOURS, get_tour
 from torchratslam.sim.world import World, WorldBuilder
 
 __all__ = [

@@ -30,8 +30,9 @@ import cv2
 import numpy as np
 import yaml
 
-from ratslam_graph.errors import InputError
-from torchratslam.sim.tours import TOURS, Session, get_tour
+from torchratslam.errors import InputError
+from torchratslam.sim.session import Session
+from torchratslam.sim.tours import TOURS, get_tour
 
 __all__ = ["FORMAT_VERSION", "open_sim", "parse_sim_spec", "write_dataset"]
 

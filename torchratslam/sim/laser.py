@@ -7,7 +7,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ratslam_graph.errors import InputError
+from torchratslam.errors import InputError
 from torchratslam.sim.render import cast_rays
 from torchratslam.sim.world import World
 

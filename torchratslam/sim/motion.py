@@ -22,8 +22,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ratslam_graph.errors import InputError
 from ratslam_graph.geometry import wrap_angle
+from torchratslam.errors import InputError
 
 __all__ = ["OdometryNoise", "Route", "odometry_from_poses"]
 

@@ -27,7 +27,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ratslam_graph.errors import InputError
+from torchratslam.errors import InputError
 from torchratslam.sim.world import TEX_ROWS, World
 
 __all__ = ["Camera", "cast_rays", "render"]

@@ -28,7 +28,7 @@ from typing import Any
 
 import numpy as np
 
-from ratslam_graph.errors import InputError
+from torchratslam.errors import InputError
 
 __all__ = ["STYLES", "TEX_RES", "TEX_ROWS", "World", "WorldBuilder", "make_texture"]
 

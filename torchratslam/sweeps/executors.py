@@ -14,7 +14,7 @@ import sys
 from collections.abc import Callable, Iterator, Sequence
 from typing import Any
 
-from ratslam_graph.errors import ConfigError, RatSLAMError
+from torchratslam.errors import ConfigError, RatSLAMError
 from torchratslam.sweeps.runner import run_group_safely
 from torchratslam.sweeps.spec import RunSpec
 

@@ -309,7 +309,8 @@ def run_group(runs: Sequence[RunSpec]) -> list[dict[str, Any]]:
     import torch
 
     from torchratslam.pipeline import RatSLAM
-    from torchratslam.pose_cells.network import PoseCellNetwork, PoseCells
+    from torchratslam.pose_cells.network import PoseCellNetwork
+    from torchratslam.pose_cells.stage import PoseCells
 
     if len(runs) == 1:
         return [run_one(runs[0])]

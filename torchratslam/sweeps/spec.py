@@ -38,7 +38,7 @@ from typing import Any
 import yaml
 
 from torchratslam.config import RatSLAMConfig, load_config
-from ratslam_graph.errors import ConfigError, InputError
+from torchratslam.errors import ConfigError, InputError
 
 __all__ = ["Dataset", "RunSpec", "SweepSpec", "expand", "load_sweep", "parse_values"]
 

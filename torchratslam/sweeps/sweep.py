@@ -10,7 +10,7 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-from ratslam_graph.errors import InputError
+from torchratslam.errors import InputError
 from torchratslam.sweeps.executors import Executor, make_executor
 from torchratslam.sweeps.runner import batch_key
 from torchratslam.sweeps.spec import RunSpec, SweepSpec, from_dict, load_sweep

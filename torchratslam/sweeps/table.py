@@ -16,8 +16,8 @@ from collections.abc import Iterable, Sequence
 from pathlib import Path
 from typing import Any
 
-from ratslam_graph.errors import InputError
 from ratslam_graph.io import atomic_write_text
+from torchratslam.errors import InputError
 from torchratslam.sweeps.runner import METRICS, TIMING_COLUMNS
 
 __all__ = ["columns", "format_cell", "parse_cell", "read_table", "to_frame", "write_table"]

@@ -30,9 +30,9 @@ from typing import Any
 
 import yaml
 
-from torchratslam.config import load_config
-from ratslam_graph.errors import ConfigError, InputError
 from ratslam_graph.io import atomic_write_text
+from torchratslam.config import load_config
+from torchratslam.errors import ConfigError, InputError
 from torchratslam.sweeps.executors import Executor, make_executor
 from torchratslam.sweeps.runner import METRICS
 from torchratslam.sweeps.spec import RunSpec, run_id, with_seed

@@ -23,7 +23,7 @@ if "MPLBACKEND" not in os.environ:
 import matplotlib.pyplot as plt
 import numpy as np
 
-from ratslam_graph.errors import InputError
+from torchratslam.errors import InputError
 
 __all__ = ["plot_activity", "plot_packet_path", "projections", "split_at_wraps"]
 

@@ -45,7 +45,7 @@ from typing import Any
 
 import numpy as np
 
-from ratslam_graph.errors import ConfigError
+from torchratslam.errors import ConfigError
 
 __all__ = ["ENTITIES", "RerunObserver", "import_rerun"]
 

@@ -1,4 +1,4 @@
-"""The cost-per-frame figure of the scale report (issue 16): cost against map size."""
+"""The cost-per-frame figure of the scale report: cost against map size."""
 
 from __future__ import annotations
 

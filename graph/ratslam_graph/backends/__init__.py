@@ -26,6 +26,7 @@ from collections.abc import Callable
 from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
 
 import numpy as np
+
 from ratslam_graph.backends.alpha import AlphaBackend, AlphaReferenceBackend
 from ratslam_graph.backends.alpha_local import AlphaLocalBackend
 from ratslam_graph.errors import ConfigError, unknown_name_message

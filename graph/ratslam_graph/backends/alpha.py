@@ -50,6 +50,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+
 from ratslam_graph.errors import ConfigError
 from ratslam_graph.geometry import TWO_PI, wrap_angle
 from ratslam_graph.posegraph import PoseGraph

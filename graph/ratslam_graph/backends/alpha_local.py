@@ -30,6 +30,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+
 from ratslam_graph.backends.alpha import _check
 from ratslam_graph.errors import ConfigError
 from ratslam_graph.geometry import wrap_angle

@@ -21,6 +21,7 @@ from collections.abc import Sequence
 
 import gtsam
 import numpy as np
+
 from ratslam_graph.errors import ConfigError, GraphError
 from ratslam_graph.geometry import wrap_angle
 from ratslam_graph.posegraph import PoseGraph, UnionFind

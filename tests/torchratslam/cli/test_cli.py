@@ -3,7 +3,6 @@ with exit code 2 and a one-line message; ``compare-backends`` reads graphs and s
 
 import csv
 import json
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -13,7 +12,6 @@ from torchratslam.cli import build_parser, main
 
 torch.set_num_threads(1)
 
-SMALL = (Path(__file__).resolve().parents[2] / "data" / "small.yaml").read_text()
 SIM = "sim:loop?laps=1&frames=40"
 
 
@@ -37,19 +35,8 @@ def test_every_option_help_has_an_example(name):
     assert "examples:" in sub.format_help()
 
 
-@pytest.fixture(scope="module")
-def run_out(tmp_path_factory):
-    root = tmp_path_factory.mktemp("run")
-    cfg = root / "small.yaml"
-    cfg.write_text(SMALL)
-    out = root / "out"
-    code = main(["run", "--config", str(cfg), "--data", SIM, "--out", str(out), "--no-progress"])
-    return code, out, cfg
-
-
-def test_run_writes_every_output(run_out):
-    code, out, _ = run_out
-    assert code == 0
+def test_run_writes_every_output(small_run):
+    out = small_run.out
     for name in ("metrics.json", "experiences.csv", "trajectory.csv", "map.png", "pose_cells.png"):
         assert (out / name).is_file() and (out / name).stat().st_size > 0, name
     assert (out / "state").is_dir()
@@ -74,16 +61,16 @@ def test_run_writes_every_output(run_out):
     for r in traj[1:]:
         assert (float(r["x"]), float(r["y"]), float(r["th"])) == pose[int(r["experience_id"])]
     # the saved state loads back with the same map
-    from torchratslam.maps.state import load_state
+    from torchratslam.maps.native import load_state
 
     st = load_state(out / "state")
     assert st.exp_pose.shape[0] == m["experiences"] and st.templates.shape[0] == m["templates"]
     assert np.allclose(st.exp_pose[:, :2], [[float(r["x"]), float(r["y"])] for r in exps])
 
 
-def test_compare_backends_on_a_saved_state_and_a_g2o_file(run_out, tmp_path, capsys):
+def test_compare_backends_on_a_saved_state_and_a_g2o_file(small_run, tmp_path, capsys):
     pytest.importorskip("ratslam_graph.compare")
-    _, out, _ = run_out
+    out = small_run.out
     js = tmp_path / "cmp.json"
     argv = ["compare-backends", "--json", str(js)]
     assert main([*argv, "--map", str(out / "state"), "--backends", "alpha,gtsam"]) == 0
@@ -94,7 +81,6 @@ def test_compare_backends_on_a_saved_state_and_a_g2o_file(run_out, tmp_path, cap
     assert "| alpha |" in printed and "| gtsam |" in printed
 
     from ratslam_graph.io import write_g2o
-
     from torchratslam.experiments.compare_backends import load_posegraph
 
     pg = load_posegraph(out / "state")
@@ -114,8 +100,8 @@ def _fails(argv, capsys, match):
     return err
 
 
-def test_cli_fails_cleanly_on_bad_input(tmp_path, capsys, run_out):
-    _, _, cfg = run_out
+def test_cli_fails_cleanly_on_bad_input(tmp_path, capsys, small_run):
+    cfg = small_run.config
     bad = tmp_path / "bad.yaml"
     bad.write_text("pc_dim_xyz: 3\n")
     (tmp_path / "d" / "frames").mkdir(parents=True)
@@ -135,10 +121,10 @@ def test_cli_fails_cleanly_on_bad_input(tmp_path, capsys, run_out):
     _fails(["compare-backends", "--map", str(tmp_path / "d")], capsys, "")
 
 
-def test_run_on_a_written_dataset_directory(tmp_path, run_out, capsys):
+def test_run_on_a_written_dataset_directory(tmp_path, small_run, capsys):
     from torchratslam.sim import open_sim, write_dataset
 
-    _, _, cfg = run_out
+    cfg = small_run.config
     data = write_dataset(open_sim("sim:loop?laps=0.2&frames=12"), tmp_path / "ds")
     out = tmp_path / "out"
     argv = ["run", "--config", str(cfg), "--data", str(data), "--no-progress"]
@@ -157,9 +143,9 @@ def test_run_on_a_written_dataset_directory(tmp_path, run_out, capsys):
     assert m["frames"] == 12 and m["odometry"] == "visual"
 
 
-def test_run_with_load_merges_into_the_stored_map(run_out, tmp_path):
+def test_run_with_load_merges_into_the_stored_map(small_run, tmp_path):
     pytest.importorskip("torchratslam.multisession.session")
-    _, out, cfg = run_out
+    out, cfg = small_run.out, small_run.config
     out2 = tmp_path / "second"
     argv = ["run", "--config", str(cfg), "--data", SIM, "--out", str(out2), "--no-progress"]
     assert main([*argv, "--max-frames", "10", "--load", str(out / "state")]) == 0

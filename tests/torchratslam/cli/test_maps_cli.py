@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import json
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -12,24 +11,9 @@ import torch
 
 from torchratslam.cli import build_parser, main
 from torchratslam.maps.io import load_state
-from torchratslam.maps.state import save_map
+from torchratslam.maps.native import save_map
 
 torch.set_num_threads(1)
-
-SMALL = (Path(__file__).resolve().parents[2] / "data" / "small.yaml").read_text()
-
-
-@pytest.fixture(scope="module")
-def run_out(tmp_path_factory):
-    root = tmp_path_factory.mktemp("maps_cli")
-    cfg = root / "small.yaml"
-    cfg.write_text(SMALL)
-    out = root / "out"
-    sim = "sim:loop?laps=1&frames=40"
-    assert (
-        main(["run", "--config", str(cfg), "--data", sim, "--out", str(out), "--no-progress"]) == 0
-    )
-    return root, out, cfg
 
 
 @pytest.mark.parametrize("name", ["compare-maps", "convert"])
@@ -39,8 +23,8 @@ def test_help_has_examples(name):
     assert "examples:" in sub.format_help()
 
 
-def test_convert_both_ways_keeps_what_each_format_holds(run_out, capsys):
-    root, out, cfg = run_out
+def test_convert_both_ways_keeps_what_each_format_holds(small_run, capsys):
+    root, out, cfg = small_run.out.parent, small_run.out, small_run.config
     src = load_state(out)
     assert main(["convert", str(out), str(root / "ref"), "--to", "reference", "--json"]) == 0
     rep = json.loads(capsys.readouterr().out)
@@ -74,8 +58,8 @@ def test_convert_both_ways_keeps_what_each_format_holds(run_out, capsys):
     assert load_state(root / "nat").equals(src)
 
 
-def test_convert_refuses_to_overwrite_and_detects_a_loss(run_out, tmp_path, monkeypatch, capsys):
-    _, out, _ = run_out
+def test_convert_refuses_to_overwrite_and_detects_a_loss(small_run, tmp_path, monkeypatch, capsys):
+    out = small_run.out
     (tmp_path / "full").mkdir()
     (tmp_path / "full" / "mine.txt").write_text("keep")
     assert main(["convert", str(out), str(tmp_path / "full"), "--to", "reference"]) == 2
@@ -97,8 +81,8 @@ def test_convert_refuses_to_overwrite_and_detects_a_loss(run_out, tmp_path, monk
     assert not (tmp_path / "x").exists() and not list(tmp_path.glob(".x.*"))
 
 
-def test_compare_maps_prints_both_icp_conventions(run_out, tmp_path, capsys):
-    _, out, cfg = run_out
+def test_compare_maps_prints_both_icp_conventions(small_run, tmp_path, capsys):
+    out, cfg = small_run.out, small_run.config
     src = load_state(out)
     moved = src.copy()  # B = A moved by a known rigid motion
     a, t = 0.03, np.array([0.05, -0.02])

@@ -19,7 +19,7 @@ import pytest
 import torch
 
 from torchratslam.cli import main
-from torchratslam.maps.state import load_map, load_state, read_map_info
+from torchratslam.maps.native import load_map, load_state, read_map_info
 
 SMALL = (Path(__file__).resolve().parents[2] / "data" / "small.yaml").read_text()
 N = 40
@@ -120,7 +120,7 @@ class _Interrupting:
 def test_ctrl_c_stops_between_frames_keeps_the_map_and_checkpoints_load(
     setup, tmp_path, monkeypatch, capsys
 ):
-    from torchratslam.experiments import run_dataset as run_mod
+    from torchratslam.experiments import run_state as run_mod
     from torchratslam.readers import datasets
 
     _, cfg, data, full = setup
@@ -129,13 +129,13 @@ def test_ctrl_c_stops_between_frames_keeps_the_map_and_checkpoints_load(
         datasets, "open_data", lambda *a, **k: _Interrupting(real_open(*a, **k), 17)
     )
     saved = []
-    real_save = run_mod._save_state
+    real_save = run_mod.save_run_state
 
     def spy(slam, out, record, info):
         real_save(slam, out, record, info)
         saved.append((load_state(out / "state").frame_index, read_map_info(out / "state")))
 
-    monkeypatch.setattr(run_mod, "_save_state", spy)
+    monkeypatch.setattr(run_mod, "save_run_state", spy)
     out = tmp_path / "out"
     assert main([*_argv(cfg, data, out), "--checkpoint-every", "5"]) == 130
     err = capsys.readouterr().err

@@ -104,7 +104,7 @@ def test_icp_recovers_a_rigid_motion_between_two_maps():
     t = np.linspace(0, 2 * math.pi, 200, endpoint=False)
     target = np.stack(
         [4 * np.cos(t), 2 * np.sin(t)], 1
-    )  # an ellipse: no symmetry issue for small motions
+    )  # an ellipse: no symmetry for small motions to confuse
     src = (target - [0.2, -0.1]) @ _rot(-0.15).T
     res = icp(src, target)
     assert res.rmse < 1e-6

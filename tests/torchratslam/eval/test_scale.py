@@ -6,8 +6,8 @@ import json
 
 import numpy as np
 import pytest
-from ratslam_graph.errors import InputError
 
+from torchratslam.errors import InputError
 from torchratslam.eval.scale import format_scale_table, read_openratslam_trace, scale_report
 
 

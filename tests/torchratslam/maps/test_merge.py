@@ -315,7 +315,7 @@ def test_bad_requests_are_clear_errors():
 
 
 def _cli_maps(tmp_path, *, match=True):
-    from torchratslam.maps.state import save_map
+    from torchratslam.maps.native import save_map
 
     rng = np.random.default_rng(21)
     loaded, partial, _ = split(rng)
@@ -394,7 +394,7 @@ def two_sessions(tmp_path_factory):
 
     from torchratslam.config import load_config
     from torchratslam.maps.reference_format import write_reference
-    from torchratslam.maps.state import state_from_slam
+    from torchratslam.maps.running import state_from_slam
     from torchratslam.multisession.session import MultiSessionRatSLAM
     from torchratslam.pipeline import RatSLAM
     from torchratslam.sim import get_tour
@@ -514,7 +514,7 @@ def test_cli_merge_options_select_the_readings(tmp_path, capsys):
     loaded.exp_template[5] = 2  # template 2 has experiences 2 and 5; 5 is nearer
     loaded.exp_pc[5] = loaded.template_pc[2] + [0.2, 0, 0]
     loaded.exp_pc[2] = np.mod(loaded.template_pc[2] + [3, 0, 0], DIMS)
-    from torchratslam.maps.state import save_map
+    from torchratslam.maps.native import save_map
 
     save_map(loaded, tmp_path / "loaded2")
     args = ["merge", "--config", str(cfg), "--loaded", str(tmp_path / "loaded2")]

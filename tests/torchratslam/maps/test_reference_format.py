@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 
 from torchratslam.errors import InputError, MapFormatError
+from torchratslam.maps.compat import conform
 from torchratslam.maps.io import load_state, map_format
 from torchratslam.maps.reference_format import (
     FILES,
@@ -23,7 +24,7 @@ from torchratslam.maps.reference_format import (
     reference_texts,
     write_reference,
 )
-from torchratslam.maps.state import MISSING_KEY, MapState, conform
+from torchratslam.maps.state import MISSING_KEY, MapState
 
 CFG = {"template_x_size": 3, "template_y_size": 2, "pc_dim_xy": 5, "pc_dim_th": 8}
 

@@ -11,8 +11,10 @@ import pytest
 
 from torchratslam.config import load_config
 from torchratslam.errors import InputError, MapFormatError
-from torchratslam.maps import state as state_mod
-from torchratslam.maps.state import MapState, check_compatible, load_map, load_state, save_map
+from torchratslam.maps import native
+from torchratslam.maps.compat import check_compatible
+from torchratslam.maps.native import load_map, load_state, save_map
+from torchratslam.maps.state import MapState
 
 CONFIG = load_config(
     pc_dim_xy=7, pc_dim_th=10, template_x_size=5, template_y_size=3, vt_shift_match=2
@@ -67,7 +69,7 @@ def test_round_trip_is_exact(tmp_path):
     save_map(s, tmp_path / "out" / "state")
     assert load_state(tmp_path / "out").equals(s)
     meta = json.loads((tmp_path / "m" / "state.json").read_text())
-    assert meta["version"] == state_mod.FORMAT_VERSION and meta["counts"]["experiences"] == 9
+    assert meta["version"] == native.FORMAT_VERSION and meta["counts"]["experiences"] == 9
 
 
 def test_equals_notices_every_difference():
@@ -96,7 +98,7 @@ def test_a_crash_while_writing_leaves_the_old_map_intact(tmp_path, monkeypatch):
     def boom(*args, **kwargs):
         raise OSError("disk full")
 
-    monkeypatch.setattr(state_mod.np, "savez", boom)
+    monkeypatch.setattr(native.np, "savez", boom)
     with pytest.raises(OSError, match="disk full"):
         save_map(random_map(1), target)
     assert snapshot(target) == before

@@ -12,19 +12,13 @@ import pytest
 import torch
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from ratslam_graph.errors import ConfigError, InputError, MapFormatError
 
-from torchratslam.mbaram.model import (
-    LASER_CHANNELS,
-    MBARAM,
-    MBARAMParams,
-    OdometryIntegrator,
-    compression_ratio,
-    frame_inputs,
-    localisation_success,
-    quantisation_error,
-    run_mbaram,
-)
+from torchratslam.errors import ConfigError, InputError, MapFormatError
+from torchratslam.mbaram.inputs import OdometryIntegrator, frame_inputs
+from torchratslam.mbaram.metrics import compression_ratio, localisation_success, quantisation_error
+from torchratslam.mbaram.model import MBARAM
+from torchratslam.mbaram.params import LASER_CHANNELS, MBARAMParams
+from torchratslam.mbaram.run import run_mbaram
 from torchratslam.messages import Frame
 
 TWO = {"a": 0.6, "b": 0.4}

@@ -8,10 +8,12 @@ import numpy as np
 import pytest
 import torch
 
+import torchratslam.pipeline.defaults  # noqa: F401  (registers the default stages)
 from torchratslam.config import PoseCellParams
 from torchratslam.errors import ConfigError, InputError, MapFormatError
 from torchratslam.messages import ActionKind, ViewMatch
-from torchratslam.pose_cells.network import METHODS, PoseCellNetwork, PoseCells
+from torchratslam.pose_cells.network import METHODS, PoseCellNetwork
+from torchratslam.pose_cells.stage import PoseCells
 from torchratslam.registry import POSE_CELLS
 
 F64 = torch.float64
@@ -665,3 +667,25 @@ def test_to_cuda_steps_like_the_cpu_and_loads_back(profile):
     back = PoseCellNetwork(p, dtype=F64)
     back.load_state_dict({k: v.cpu() for k, v in gpu.state_dict().items()})
     np.testing.assert_allclose(back.centre().numpy(), cpu.centre().numpy(), atol=1e-9)
+
+
+@pytest.mark.parametrize("method", ["numpy", "crop", "separable"])
+def test_place_packet_and_set_centre(method):
+    p = _params(pc_dim_xy=21)
+    net = PoseCellNetwork(p, 1 if method == "numpy" else 2, dtype=F64, method=method)
+    net.step(0.7, 0.2, 1.0)
+    net.place_packet(24, -1, 5)  # indices wrap
+    act = net.activity.numpy()
+    assert (act[:, 5, 20, 3] == 1.0).all() and (act.sum(axis=(1, 2, 3)) == 1.0).all()
+    assert net.centre().tolist() == [[3.0, 20.0, 5.0]] * net.batch_size
+    # the next step starts from the placed packet, like a fresh network placed there
+    fresh = PoseCellNetwork(p, net.batch_size, dtype=F64, method=method)
+    with torch.no_grad():
+        fresh.activity.zero_()
+        fresh.activity[:, 5, 20, 3] = 1.0
+    assert torch.equal(net.step(0.3, 0.1, 1.0), fresh.step(0.3, 0.1, 1.0))
+    net.set_centre([1.5, 2.5, 3.5])
+    assert net.centre().tolist() == [[1.5, 2.5, 3.5]] * net.batch_size
+    assert net.best.dtype == F64
+    with pytest.raises(InputError, match="centre"):
+        net.set_centre([1.0, 2.0])

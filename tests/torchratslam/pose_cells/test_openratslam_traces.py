@@ -22,7 +22,8 @@ import torch
 from torchratslam.config import PoseCellParams
 from torchratslam.errors import ConfigError
 from torchratslam.messages import ViewMatch
-from torchratslam.pose_cells.network import PoseCellNetwork, PoseCells
+from torchratslam.pose_cells.network import PoseCellNetwork
+from torchratslam.pose_cells.stage import PoseCells
 
 DATA = Path(__file__).resolve().parents[2] / "data" / "openratslam"
 TRACES = ("irat_like", "loop_default", "fast_turns")

@@ -9,10 +9,10 @@ import math
 import cv2
 import numpy as np
 import pytest
-from ratslam_graph.errors import InputError
-from ratslam_graph.geometry import dead_reckoning
 
+from ratslam_graph.geometry import dead_reckoning
 from torchratslam.cli import main as cli_main
+from torchratslam.errors import InputError
 from torchratslam.sim import (
     Camera,
     Laser,
@@ -487,7 +487,7 @@ def test_virtual_tour_views_match_one_column_off_and_places_differ():
     import torch
 
     from torchratslam.config import load_config
-    from torchratslam.local_view.view import preprocess
+    from torchratslam.local_view.preprocessing import preprocess
 
     lp = load_config("virtual_tour").local_view
     thr, shift, step = lp.vt_match_threshold, lp.vt_shift_match, lp.vt_step_match

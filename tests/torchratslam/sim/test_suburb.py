@@ -1,4 +1,4 @@
-"""The suburb tour: a street grid driven by a car (issue 16), in a small version."""
+"""The suburb tour: a street grid driven by a car, in a small version."""
 
 from __future__ import annotations
 
@@ -6,16 +6,16 @@ import itertools
 
 import numpy as np
 import pytest
-from ratslam_graph.errors import InputError
 
+from torchratslam.errors import InputError
 from torchratslam.sim import get_tour
-from torchratslam.sim.tours import _grid_drive
+from torchratslam.sim.roads import grid_drive
 
 
 def test_grid_drive_drives_every_street_both_ways_before_repeating_one():
     n_nodes, pitch = 5, 10.0
     n_directed = 2 * 2 * n_nodes * (n_nodes - 1)
-    path = _grid_drive(np.random.default_rng(0), n_nodes, 3 * n_directed * pitch, pitch)
+    path = grid_drive(np.random.default_rng(0), n_nodes, 3 * n_directed * pitch, pitch)
     steps = list(itertools.pairwise(path))
     for a, b in steps:  # moves between neighbouring intersections inside the grid
         assert abs(a[0] - b[0]) + abs(a[1] - b[1]) == 1

@@ -4,7 +4,7 @@ import math
 
 import pytest
 
-from torchratslam.pose_cells.network import PoseCells
+from torchratslam.pose_cells.stage import PoseCells
 from torchratslam.sweeps.runner import (
     TIMING_COLUMNS,
     batch_key,
@@ -34,8 +34,9 @@ def test_batched_group_equals_separate_runs(cells, one_network):
         {
             "base": "virtual_tour",
             "set": {
-                # batching needs the torch pose-cell step (pc_engine: torch)
-                "behaviour": "torchratslam_v0",
+                # batching needs the torch pose-cell step and a step at frame 0
+                "pc_engine": "torch",
+                "skip_first_odometry": False,
                 "pc_dim_xy": xy,
                 "pc_dim_th": th,
                 "exp_loops": 20,
@@ -71,7 +72,7 @@ def test_local_view_keys_split_groups():
     spec = from_dict(
         {
             "base": "virtual_tour",
-            "set": {"behaviour": "torchratslam_v0"},
+            "set": {"pc_engine": "torch", "skip_first_odometry": False},
             "parameters": {"vt_match_threshold": [0.03, 0.05], "pc_vt_inject_energy": [0.1, 0.2]},
             "datasets": [DATA],
         }

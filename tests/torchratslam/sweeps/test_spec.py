@@ -3,8 +3,8 @@
 import itertools
 
 import pytest
-from ratslam_graph.errors import ConfigError, InputError
 
+from torchratslam.errors import ConfigError, InputError
 from torchratslam.sweeps.spec import from_dict, load_sweep, parse_values, with_seed
 
 

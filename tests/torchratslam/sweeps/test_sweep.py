@@ -22,8 +22,9 @@ SWEEP = {
     "set": {
         "pc_dim_xy": 21,
         "exp_loops": 5,
-        "behaviour": "torchratslam_v0",
-    },  # batchable (pc_engine: torch)
+        "pc_engine": "torch",
+        "skip_first_odometry": False,
+    },  # batchable (the torch pose-cell step, a step at frame 0)
     "parameters": {
         "vt_match_threshold": [0.05, 0.08],
         "pc_vt_inject_energy": {"start": 0.05, "stop": 0.25, "num": 3},

@@ -3,9 +3,9 @@
 import csv
 
 import pytest
-from ratslam_graph.errors import ConfigError, InputError
 
 from torchratslam.config import load_config
+from torchratslam.errors import ConfigError, InputError
 from torchratslam.sweeps.tune import parse_range
 
 optuna = pytest.importorskip("optuna")

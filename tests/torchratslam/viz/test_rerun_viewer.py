@@ -12,11 +12,7 @@ rr = pytest.importorskip("rerun", reason="rerun-sdk (the 'viewer' extra) is not 
 from torchratslam.cli import main  # noqa: E402
 from torchratslam.viz.rerun_viewer import ENTITIES  # noqa: E402
 
-# the project's behaviour before issue 12, which these outputs were recorded with
-SMALL = (
-    "behaviour: torchratslam_v0\n"
-    + (Path(__file__).resolve().parents[2] / "data" / "small.yaml").read_text()
-)
+SMALL = (Path(__file__).resolve().parents[2] / "data" / "small.yaml").read_text()
 SIM = "sim:loop?laps=1&frames=40"
 N = 40
 
@@ -75,7 +71,7 @@ def test_every_stream_is_recorded_and_matches_the_run(recorded):
     ):
         assert data[ent]["frame"] == list(range(N)), ent
     # the packet centre is the run's pose-cell log; the timings its per-frame ms
-    from torchratslam.maps.state import load_state
+    from torchratslam.maps.native import load_state
 
     metrics = json.loads((root / "s2" / "metrics.json").read_text())
     assert metrics["merges"] and metrics["merges"][0]["frame"] == 0
@@ -143,5 +139,5 @@ def test_multisession_sessions_continue_one_timeline(tmp_path):
     texts = [t[0] for t in data["events"]["TextLog:text"]]
     at = res["merges"][0]["frame"]  # 0, or 1 in OpenRatSLAM's behaviour (frame 0 not stepped)
     assert texts == ["session s1 starts", "session s2 starts", f"s2 merge with map 0 at frame {at}"]
-    assert data["events"]["frame"] == [0, 20, 20]
-    assert data["map/merges"]["frame"] == [20]
+    assert data["events"]["frame"] == [0, 20, 20 + at]  # session 2 starts at timeline frame 20
+    assert data["map/merges"]["frame"] == [20 + at]

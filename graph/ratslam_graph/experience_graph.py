@@ -1,0 +1,480 @@
+"""The experiences and links of an experience map: growable arrays mirrored by networkx.
+
+:class:`ExperienceGraph` holds node poses, pose-cell coordinates, link endpoints and
+measurements in preallocated numpy arrays (grown by doubling) kept in sync with a
+:class:`networkx.DiGraph`, so building the pose graph and relaxing never loops over links
+or nodes in Python; the graph's attributes are refreshed lazily when
+:attr:`ExperienceGraph.graph` is read. :class:`ratslam_graph.experience_map.ExperienceMap`
+drives it (odometry, pose-cell actions, relaxation).
+
+Example:
+    >>> from ratslam_graph.experience_graph import ExperienceGraph
+    >>> g = ExperienceGraph()
+    >>> g.add_experience(0.0, 0.0, 0.0), g.add_experience(1.0, 0.0, 0.0)
+    (0, 1)
+    >>> g.add_link(0, 1, 1.0, 0.0, 0.0, 2.0)
+    True
+    >>> g.links()["d"].tolist()
+    [1.0]
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import networkx as nx
+import numpy as np
+
+from ratslam_graph import relaxation
+from ratslam_graph.errors import GraphError, InputError
+from ratslam_graph.features import link_confidence
+from ratslam_graph.geometry import wrap_angle
+from ratslam_graph.posegraph import PoseGraph
+from ratslam_graph.queries import MapView
+
+__all__ = ["ExperienceGraph"]
+
+
+def _grow(a: np.ndarray, need: int) -> np.ndarray:
+    """Return ``a`` with at least ``need`` rows (doubling), keeping its content."""
+    if need <= len(a):
+        return a
+    cap = max(need, 2 * len(a), 16)
+    out = np.zeros((cap, *a.shape[1:]), dtype=a.dtype)
+    out[: len(a)] = a
+    return out
+
+
+def _measurement_of(d: float, heading: float, facing: float) -> tuple[float, float, float]:
+    """A RatSLAM link ``(d, heading, facing)`` as a Pose2 between ``[dx, dy, dth]``."""
+    return d * math.cos(heading), d * math.sin(heading), facing
+
+
+def _node_attrs(
+    pose: np.ndarray, pc: np.ndarray, vt: np.ndarray, frame: np.ndarray, t: np.ndarray, i: int
+) -> dict[str, Any]:
+    """The graph attributes of experience ``i``."""
+    x, y, th = pose[i].tolist()
+    return {
+        "x": x,
+        "y": y,
+        "th": th,
+        "pc": tuple(pc[i].tolist()),
+        "template_id": int(vt[i]),
+        "frame": int(frame[i]),
+        "t": float(t[i]),
+    }
+
+
+def _edge_attrs(link: np.ndarray, counts: np.ndarray, behaviour: np.ndarray, k: int) -> dict:
+    """The graph attributes of link ``k``."""
+    d, heading, facing, dt = link[k].tolist()
+    trav, succ, trials = counts[k].tolist()
+    return {
+        "d": d,
+        "heading": heading,
+        "facing": facing,
+        "dt": dt,
+        "traversals": trav,
+        "successes": succ,
+        "trials": trials,
+        "behaviour": int(behaviour[k]),
+        "confidence": float(link_confidence(succ, trials)),
+    }
+
+
+class ExperienceGraph:
+    """Experiences and links in growable arrays, mirrored by a :class:`networkx.DiGraph`.
+
+    The arrays are public for the experience map and the relaxation, which write poses
+    and link values in place: rows ``[:n]`` (experiences) and ``[:e]`` (links) are in
+    use, the rest is spare capacity. Change the structure (experiences, links) through
+    the methods so the index and the graph stay in sync, and call
+    :meth:`poses_changed` after writing poses.
+
+    Attributes:
+        n, e: number of experiences and of links.
+        pose, pc: ``[x, y, th]`` and pose-cell coordinates ``(x', y', th')`` of each
+            experience; vt, frame, t: its template, frame index and time at creation.
+        src, dst: link ends; link: ``[d, heading, facing, dt]``; meas: ``[dx, dy, dth]``
+            in the source's frame; counts: ``(traversals, successes, trials)``;
+            behaviour: the movement behaviour label.
+        version: bumped by every change of poses or links.
+    """
+
+    LINK_FIELDS = ("src", "dst", "link", "meas", "counts", "behaviour")
+
+    def __init__(self) -> None:
+        self.clear()
+
+    def clear(self) -> None:
+        """Forget every experience and link."""
+        self.n = 0
+        self.e = 0
+        self.pose = np.zeros((0, 3))
+        self.pc = np.zeros((0, 3))
+        self.vt = np.zeros(0, dtype=np.int64)
+        self.frame = np.zeros(0, dtype=np.int64)
+        self.t = np.zeros(0)
+        self.src = np.zeros(0, dtype=np.int64)
+        self.dst = np.zeros(0, dtype=np.int64)
+        self.link = np.zeros((0, 4))  # d, heading, facing, dt
+        self.meas = np.zeros((0, 3))  # dx, dy, dth in the source's frame
+        self.counts = np.zeros((0, 3), dtype=np.int64)  # traversals, successes, trials
+        self.behaviour = np.zeros(0, dtype=np.int64)
+        self.version = 0
+        self._eidx: dict[tuple[int, int], int] = {}
+        self._g = nx.DiGraph()
+        self._dirty_edges: set[int] = set()  # links whose graph attributes are stale
+        self._dirty_nodes: set[int] = set()  # experiences whose graph attributes are stale
+        self._poses_dirty = False
+        self._order: np.ndarray | None = None
+        self._links_version = 0  # bumped by every change of the links
+        # (links version, reference links): the links in OpenRatSLAM's order
+        self._ref_links: tuple[int, relaxation.ReferenceLinks] | None = None
+
+    def __len__(self) -> int:
+        return self.n
+
+    @property
+    def poses(self) -> np.ndarray:
+        """Experience poses ``[x, y, th]`` (read-only view; row = experience id).
+
+        Shape:
+            (N, 3).
+        """
+        v = self.pose[: self.n].view()
+        v.flags.writeable = False
+        return v
+
+    def poses_changed(self) -> None:
+        """Say that :attr:`pose` was written in place (the graph's poses are stale)."""
+        self._poses_dirty = True
+        self.version += 1
+
+    @property
+    def graph(self) -> nx.DiGraph:
+        """The map as a :class:`networkx.DiGraph` (nodes: experiences; edges: links).
+
+        Node attributes: ``x, y, th, pc (x', y', th' cells), template_id, frame, t``.
+        Edge attributes: ``d, heading, facing, dt, traversals, successes, trials,
+        behaviour, confidence``. Treat it as read-only: change the map through the
+        methods so the arrays stay in sync.
+        """
+        if self._dirty_nodes:
+            nodes = self._g.nodes
+            for i in sorted(self._dirty_nodes):
+                nodes[i].update(_node_attrs(self.pose, self.pc, self.vt, self.frame, self.t, i))
+            self._dirty_nodes.clear()
+        if self._dirty_edges:
+            self._flush_edges()
+        if self._poses_dirty:
+            p = self.pose[: self.n].tolist()
+            nx.set_node_attributes(
+                self._g, {i: {"x": x, "y": y, "th": th} for i, (x, y, th) in enumerate(p)}
+            )
+            self._poses_dirty = False
+        return self._g
+
+    def _flush_edges(self) -> None:
+        for k in sorted(self._dirty_edges):
+            attrs = _edge_attrs(self.link, self.counts, self.behaviour, k)
+            self._g.edges[int(self.src[k]), int(self.dst[k])].update(attrs)
+        self._dirty_edges.clear()
+
+    def check_id(self, i: int, what: str) -> int:
+        """``i`` as an existing experience id (``what`` names it in the error)."""
+        i = int(i)
+        if not 0 <= i < self.n:
+            raise GraphError(
+                f"{what} experience {i} does not exist (the map has {self.n}); "
+                "the pose cells and the experience map are out of sync"
+            )
+        return i
+
+    def add_experience(
+        self,
+        x: float,
+        y: float,
+        th: float,
+        *,
+        pc: tuple[float, float, float] | np.ndarray = (0.0, 0.0, 0.0),
+        template_id: int = -1,
+        frame: int = -1,
+        t: float = 0.0,
+    ) -> int:
+        """Append an experience (no link, current experience unchanged).
+
+        Args:
+            x, y, th: map pose (m, m, rad; ``th`` is wrapped to ``(-pi, pi]``).
+            pc: pose-cell coordinates ``(x', y', th')`` (cells).
+            template_id: the visual template of the experience.
+            frame: frame index at creation.
+            t: timestamp at creation (s).
+
+        Returns:
+            The new experience id (= its row).
+        """
+        pose = (float(x), float(y), wrap_angle(float(th), include_pi=True))
+        pcv = np.asarray(pc, dtype=np.float64).reshape(-1)
+        if pcv.shape != (3,) or not (
+            all(map(math.isfinite, pose)) and all(map(math.isfinite, pcv.tolist()))
+        ):
+            raise InputError(
+                f"experience needs finite x, y, th and 3 pose-cell coordinates, got {pose}, {pcv}"
+            )
+        i = self.n
+        need = i + 1
+        self.pose = _grow(self.pose, need)
+        self.pc = _grow(self.pc, need)
+        self.vt = _grow(self.vt, need)
+        self.frame = _grow(self.frame, need)
+        self.t = _grow(self.t, need)
+        self.pose[i] = pose
+        self.pc[i] = pcv
+        self.vt[i] = int(template_id)
+        self.frame[i] = int(frame)
+        self.t[i] = float(t)
+        self.n = need
+        self.version += 1
+        self._g.add_node(i)  # its attributes are written when the graph is read
+        self._dirty_nodes.add(i)
+        return i
+
+    def set_link(self, k: int, d: float, heading: float, facing: float, dt: float) -> None:
+        """Write link ``k``'s ``(d, heading, facing, dt)`` and its measurement."""
+        self.link[k] = (d, heading, facing, dt)
+        self.meas[k] = _measurement_of(d, heading, facing)
+        self._dirty_edges.add(k)
+        self.version += 1
+        self._links_version += 1
+
+    def link_index(self, a: int, b: int) -> int:
+        """Row of the link between ``a`` and ``b`` in either direction, or -1."""
+        k = self._eidx.get((int(a), int(b)))
+        if k is None:
+            k = self._eidx.get((int(b), int(a)), -1)
+        return k
+
+    def add_link(
+        self,
+        src: int,
+        dst: int,
+        d: float,
+        heading: float,
+        facing: float,
+        dt: float,
+        *,
+        behaviour: int = 0,
+        counts: tuple[int, int, int] = (1, 1, 1),
+    ) -> bool:
+        """Add a link ``src -> dst`` unless the pair is already linked (either direction).
+
+        Args:
+            src, dst: experience ids.
+            d: distance (m); heading, facing: relative to ``src``'s orientation (rad).
+            dt: elapsed time of the transition (s).
+            behaviour: movement behaviour label ``beta_ij`` of Eq. 9.
+            counts: initial ``(traversals, successes, trials)`` (Eq. 9's ``n_ij`` and
+                ``n_i,beta``).
+
+        Returns:
+            True if a link was added, False if the pair was already linked.
+        """
+        src = self.check_id(src, "link source")
+        dst = self.check_id(dst, "link target")
+        if src == dst:
+            raise GraphError(f"cannot link experience {src} to itself")
+        if self.link_index(src, dst) >= 0:
+            return False
+        vals = np.array([d, heading, facing, dt], dtype=np.float64)
+        if not np.all(np.isfinite(vals)) or d < 0:
+            raise InputError(
+                f"link needs finite d >= 0, heading, facing and dt, got {vals.tolist()}"
+            )
+        k = self.e
+        need = k + 1
+        before = self._links_version
+        for name in self.LINK_FIELDS:
+            setattr(self, name, _grow(getattr(self, name), need))
+        self.src[k] = src
+        self.dst[k] = dst
+        self.set_link(
+            k,
+            float(d),
+            wrap_angle(float(heading), include_pi=True),
+            wrap_angle(float(facing), include_pi=True),
+            float(dt),
+        )
+        self.counts[k] = counts
+        self.behaviour[k] = int(behaviour)
+        self.e = need
+        self._eidx[(src, dst)] = k
+        self._g.add_edge(src, dst)  # its attributes are written when the graph is read
+        self._dirty_edges.add(k)
+        # keep the cached reference order current when it was current before the link
+        cached, order = self._ref_links, self._order
+        if cached is None or order is None or cached[0] != before or len(order) != k:
+            self._order = None
+        else:
+            self._order, ref = relaxation.insert_reference_link(
+                order, cached[1], k, src, dst, self.link[k, :3]
+            )
+            self._ref_links = (self._links_version, ref)
+        return True
+
+    def remove_link(self, src: int, dst: int) -> None:
+        """Delete the link ``src -> dst`` (exact direction); later links shift down one row."""
+        k = self._eidx.get((int(src), int(dst)))
+        if k is None:
+            raise GraphError(f"there is no link {src} -> {dst} to remove")
+        self._flush_edges()  # rows shift below
+        e = self.e
+        for name in self.LINK_FIELDS:
+            a = getattr(self, name)
+            a[k : e - 1] = a[k + 1 : e]
+        self.e = e - 1
+        self._g.remove_edge(int(src), int(dst))
+        self.version += 1
+        self._links_version += 1
+        s, d = self.src[: self.e].tolist(), self.dst[: self.e].tolist()
+        self._eidx = {(a, b): i for i, (a, b) in enumerate(zip(s, d))}
+        self._order = None
+
+    def count_transition(self, src: int, dst: int, behaviour: int, threshold: float) -> None:
+        """Count a transition for Eq. 9 and delete links whose confidence fell too low.
+
+        Every link leaving ``src`` with the same behaviour had a trial; the one to
+        ``dst`` succeeded, the others failed. The link between the pair (either
+        direction) counts a traversal. Links leaving ``src`` whose confidence falls below
+        ``threshold`` (``exp_link_confidence_threshold``; 0: never) are removed.
+        """
+        k_pair = self.link_index(src, dst)
+        # the links leaving src (a node's few out-links, not the map's links)
+        eidx, beh, dsts, counts = self._eidx, self.behaviour, self.dst, self.counts
+        out = [eidx[(src, v)] for v in self._g.successors(src)]
+        rows = [k for k in out if beh[k] == behaviour]
+        for k in rows:
+            counts[k, 2] += 1
+            if dsts[k] == dst:
+                counts[k, 1] += 1
+        if k_pair >= 0:
+            counts[k_pair, 0] += 1
+            self._dirty_edges.add(k_pair)
+        self._dirty_edges.update(rows)
+        if threshold > 0.0 and rows:
+            sel = np.array(rows, dtype=np.int64)
+            conf = link_confidence(self.counts[sel, 1], self.counts[sel, 2])
+            doomed = [(src, int(v)) for v in self.dst[sel[conf < threshold]]]
+            for a, b in doomed:
+                self.remove_link(a, b)
+
+    def posegraph(self, order: str = "creation") -> PoseGraph:
+        """The map as a :class:`~ratslam_graph.posegraph.PoseGraph`.
+
+        Built from the arrays, no loops.
+
+        Args:
+            order: ``"creation"`` lists links as they were made: append-only, which
+                incremental backends (iSAM2, the cached colouring of "alpha") rely on;
+                the alpha backends sort by source themselves to visit links in
+                OpenRatSLAM's order. ``"reference"`` lists them in that order (by
+                source experience, then creation).
+        """
+        e = self.e
+        if order == "reference":
+            src, dst, _ = self.reference_links()
+            edges = np.stack([src, dst], axis=1)
+            meas = self.meas[:e][self._order]
+        elif order == "creation":
+            edges = np.stack([self.src[:e], self.dst[:e]], axis=1)
+            meas = self.meas[:e]
+        else:
+            raise InputError(f"order must be 'reference' or 'creation', got {order!r}")
+        return PoseGraph(self.pose[: self.n], edges, meas, np.arange(self.n, dtype=np.int64))
+
+    def reference_links(self) -> relaxation.ReferenceLinks:
+        """Link sources, targets and ``(d, heading, facing)`` in OpenRatSLAM's order
+        (:func:`ratslam_graph.relaxation.reference_order`; cached, kept current as links
+        are added). Treat them as read-only.
+
+        Shape:
+            Returns (E,), (E,), (E, 3).
+        """
+        cached = self._ref_links
+        if cached is None or cached[0] != self._links_version or len(cached[1][0]) != self.e:
+            e = self.e
+            if self._order is None or len(self._order) != e:
+                self._order = relaxation.reference_order(self.src[:e])
+            ref = relaxation.reference_links(self.src[:e], self.dst[:e], self.link[:e], self._order)
+            cached = self._ref_links = (self._links_version, ref)
+        return cached[1]
+
+    def links(self) -> dict[str, np.ndarray]:
+        """Every link as arrays (creation order): ``src, dst, d, heading, facing, dt,
+        traversals, successes, trials, behaviour, confidence``, each (E,)."""
+        e = self.e
+        c = self.counts[:e]
+        return {
+            "src": self.src[:e].copy(),
+            "dst": self.dst[:e].copy(),
+            "d": self.link[:e, 0].copy(),
+            "heading": self.link[:e, 1].copy(),
+            "facing": self.link[:e, 2].copy(),
+            "dt": self.link[:e, 3].copy(),
+            "traversals": c[:, 0].copy(),
+            "successes": c[:, 1].copy(),
+            "trials": c[:, 2].copy(),
+            "behaviour": self.behaviour[:e].copy(),
+            "confidence": link_confidence(c[:, 1], c[:, 2]),
+        }
+
+    def view(self, current_id: int, zone_xy: float, zone_th: float) -> MapView:
+        """The arrays in use, read-only (views, no copies), with the map's current
+        experience and activity zone constants."""
+        n, e = self.n, self.e
+        ro = [
+            a.view() for a in (self.pose[:n], self.pc[:n], self.vt[:n], self.src[:e], self.dst[:e])
+        ] + [self.link[:e].view(), self.meas[:e].view()]
+        for v in ro:
+            v.flags.writeable = False
+        poses, pc, vt, src, dst, link, meas = ro
+        return MapView(
+            poses=poses,
+            pc=pc,
+            template_id=vt,
+            src=src,
+            dst=dst,
+            link=link,
+            meas=meas,
+            current_id=int(current_id),
+            zone_xy=float(zone_xy),
+            zone_th=float(zone_th),
+        )
+
+    def load(
+        self,
+        arrays: dict[str, Any],
+        eidx: dict[tuple[int, int], int],
+    ) -> None:
+        """Replace everything with checked state arrays (``poses, pc, template_id, frame,
+        t, link_ends, link_values, link_counts, link_behaviour``) and their link index."""
+        self.clear()
+        ends, vals = arrays["link_ends"], arrays["link_values"]
+        n, e = len(arrays["poses"]), len(ends)
+        self.n, self.e = n, e
+        self.pose, self.pc, self.vt = arrays["poses"], arrays["pc"], arrays["template_id"]
+        self.frame, self.t = arrays["frame"], arrays["t"]
+        self.src, self.dst = ends[:, 0].copy(), ends[:, 1].copy()
+        self.link = vals
+        # the same scalar formula as at link creation, so measurements round-trip bit for bit
+        self.meas = np.array([_measurement_of(*v) for v in vals[:, :3].tolist()]).reshape(e, 3)
+        self.counts, self.behaviour = arrays["link_counts"], arrays["link_behaviour"]
+        self._eidx = eidx
+        nodes = (self.pose, self.pc, self.vt, self.frame, self.t)
+        self._g.add_nodes_from((i, _node_attrs(*nodes, i)) for i in range(n))
+        s, d = ends[:, 0].tolist(), ends[:, 1].tolist()
+        self._g.add_edges_from(
+            (s[k], d[k], _edge_attrs(self.link, self.counts, self.behaviour, k)) for k in range(e)
+        )

@@ -1,0 +1,75 @@
+"""The template bank: rows, metadata and summaries kept in step as it grows."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+
+from torchratslam.errors import ConfigError, InputError
+from torchratslam.local_view.bank import TemplateBank
+
+
+def _summaries(t: torch.Tensor) -> dict[str, torch.Tensor]:
+    return {"cols": t.sum(1), "peak": t.amax(dim=(1, 2))[:, None]}
+
+
+def _bank(capacity: int = 1) -> TemplateBank:
+    return TemplateBank(
+        3,
+        5,
+        summaries=_summaries,
+        summary_shapes={"cols": (5,), "peak": (1,)},
+        capacity=capacity,
+        dtype=torch.float64,
+    )
+
+
+def test_append_keeps_rows_metadata_and_summaries_in_step_while_doubling():
+    rng = np.random.default_rng(0)
+    rows = rng.random((37, 3, 5))
+    bank = _bank()
+    caps = []
+    for i, r in enumerate(rows):
+        ids = bank.append(torch.from_numpy(r) if i % 2 else torch.from_numpy(r[None]), i * 10)
+        assert list(ids) == [i]
+        caps.append(bank.capacity)
+    assert sorted(set(caps)) == [1, 2, 4, 8, 16, 32, 64]
+    assert len(bank) == 37 and bank.ids.tolist() == list(range(37))
+    np.testing.assert_array_equal(bank.data.numpy(), rows)
+    np.testing.assert_allclose(bank.means.numpy(), rows.mean((1, 2)), atol=1e-15)
+    assert bank.frames.tolist() == [i * 10 for i in range(37)]
+    for i in range(37):  # every summary row belongs to its template
+        np.testing.assert_allclose(bank.summary("cols")[i].numpy(), rows[i].sum(0), atol=1e-15)
+        assert float(bank.summary("peak")[i, 0]) == rows[i].max()
+    assert bank.summary_shapes == {"cols": (5,), "peak": (1,)}
+
+
+def test_frames_default_to_minus_one_and_batches_take_one_frame_each():
+    bank = _bank(capacity=8)
+    assert list(bank.append(torch.zeros(2, 3, 5))) == [0, 1]
+    assert list(bank.append(torch.ones(3, 3, 5), torch.tensor([7, 8, 9]))) == [2, 3, 4]
+    assert bank.frames.tolist() == [-1, -1, 7, 8, 9]
+    assert bank.capacity == 8
+
+
+def test_buffers_are_not_part_of_the_state_dict():
+    bank = _bank()
+    bank.append(torch.ones(4, 3, 5))
+    assert bank.state_dict() == {}
+    names = {name for name, _ in bank.named_buffers()}
+    assert names == {"_data", "_means", "_frames", "_cols", "_peak"}
+    assert bank.bytes_per_template() == (15 + 1 + 5 + 1) * 8 + 8
+
+
+def test_bad_templates_and_sizes_are_clear_errors():
+    bank = _bank()
+    with pytest.raises(InputError, match="templates"):
+        bank.append(torch.zeros(2, 3, 4))
+    with pytest.raises(InputError, match="NaN"):
+        bank.append(torch.full((1, 3, 5), float("nan")))
+    assert len(bank) == 0
+    with pytest.raises(KeyError, match="nothing"):
+        bank.summary("nothing")
+    with pytest.raises(ConfigError, match="positive"):
+        TemplateBank(0, 5)

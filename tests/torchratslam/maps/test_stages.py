@@ -1,0 +1,87 @@
+"""The stage records a map is made of: round trips through the stages' dictionaries."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from ratslam_graph.experience_map import STATE_FORMAT, STATE_VERSION
+from ratslam_graph.state import ExperienceMapState
+from torchratslam.config import load_config
+from torchratslam.errors import MapFormatError
+from torchratslam.local_view.state import LocalViewState
+from torchratslam.maps.running import apply_state, state_from_slam
+from torchratslam.maps.stages import compose, decompose
+from torchratslam.messages import SessionState
+from torchratslam.pipeline import RatSLAM
+from torchratslam.pose_cells.state import PoseCellState
+from torchratslam.protocols import SlamSystem
+
+CONFIG = load_config(
+    pc_dim_xy=7, pc_dim_th=10, template_x_size=5, template_y_size=3, vt_shift_match=2
+)
+
+
+def _run(n: int = 25) -> RatSLAM:
+    rng = np.random.default_rng(3)
+    slam = RatSLAM(CONFIG)
+    for _ in range(n):
+        slam.step(rng.random((12, 20)), (0.3, rng.normal(0, 0.2), 0.1))
+    return slam
+
+
+def test_each_record_gives_back_the_stage_dictionary():
+    slam = _run()
+    for module, record in (
+        (slam.local_view, LocalViewState),
+        (slam.pose_cells, PoseCellState),
+        (slam.experience_map, ExperienceMapState),
+    ):
+        d = module.get_state()
+        back = record.from_dict(d).to_dict()
+        assert list(back) == list(d)  # same keys, same order
+        for k, v in d.items():
+            assert np.array_equal(np.asarray(back[k]), np.asarray(v)), k
+
+
+def test_compose_then_decompose_is_the_identity_on_the_records():
+    slam = _run()
+    state = state_from_slam(slam)
+    parts = decompose(state)
+    again = compose(
+        state.config,
+        parts.local_view,
+        parts.pose_cells,
+        parts.experience_map,
+        parts.session,
+        parts.odometry or None,
+    )
+    assert again.equals(state)
+    assert parts.session == slam.session == SessionState(25, slam.session.last_t)
+
+
+def test_a_loaded_slam_has_the_session_and_stages_of_the_saved_one():
+    slam = _run()
+    other = RatSLAM(CONFIG)
+    apply_state(state_from_slam(slam), other)
+    assert other.session == slam.session
+    assert isinstance(other, SlamSystem)
+    assert state_from_slam(other).equals(state_from_slam(slam))
+
+
+def test_the_experience_map_record_names_the_stage_format():
+    assert (ExperienceMapState.FORMAT, ExperienceMapState.VERSION) == (STATE_FORMAT, STATE_VERSION)
+
+
+def test_wrong_shapes_raise_map_format_errors():
+    with pytest.raises(MapFormatError, match="templates"):
+        LocalViewState(templates=np.zeros((2, 3)))
+    with pytest.raises(MapFormatError, match="means"):
+        LocalViewState(templates=np.zeros((2, 3, 4)), means=np.zeros(3))
+    good = PoseCellState.empty()
+    with pytest.raises(MapFormatError, match="template_decay"):
+        good.replace(template_pc=np.zeros((2, 3)))
+    with pytest.raises(MapFormatError, match="link_values"):
+        ExperienceMapState.empty().replace(link_ends=np.zeros((1, 2), np.int64))
+    with pytest.raises(MapFormatError, match="link_values"):
+        ExperienceMapState.from_dict({"link_ends": np.zeros((0, 2))})

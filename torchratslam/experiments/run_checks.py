@@ -1,0 +1,139 @@
+"""The checks of a dataset run made before its first frame: the counts, the device, that
+every option applies to the data, and that OUT can take the outputs.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Any
+
+from ratslam_graph.atomic import Manifest
+from torchratslam.errors import InputError
+from torchratslam.experiments.run_options import RunOptions
+from torchratslam.experiments.run_outputs import OUTPUT_FILES, TUM_FILES
+from torchratslam.experiments.run_state import RUN_RECORD, STATE_DIR
+
+__all__ = ["check_applicable", "check_counts", "check_device", "check_out"]
+
+
+def check_counts(threads: int, max_frames: int | None, checkpoint_every: int | None) -> None:
+    """The counts must be positive.
+
+    Raises:
+        InputError: a count below one.
+    """
+    if threads < 1:
+        raise InputError(f"--threads must be >= 1, got {threads}")
+    if max_frames is not None and max_frames <= 0:
+        raise InputError(f"--max-frames must be a positive number of frames, got {max_frames}")
+    if checkpoint_every is not None and checkpoint_every <= 0:
+        raise InputError(f"--checkpoint-every must be >= 1 frame, got {checkpoint_every}")
+
+
+def check_device(spec: str | None) -> Any:
+    """The torch device ``spec``, checked against this torch build and machine (None:
+    the default).
+
+    Raises:
+        InputError: not a device, or not usable here.
+    """
+    if spec is None:
+        return None
+    import torch
+
+    try:
+        dev = torch.device(spec)
+    except (RuntimeError, ValueError, TypeError):
+        raise InputError(
+            f"--device {spec!r} is not a torch device; use cpu, cuda, cuda:N or mps"
+        ) from None
+    if dev.type == "cuda":
+        if not torch.cuda.is_available():
+            why = "has no CUDA" if torch.version.cuda is None else "sees no GPU"
+            raise InputError(
+                f"--device {spec}: this torch ({torch.__version__}) {why}; use --device cpu"
+            )
+        if dev.index is not None and dev.index >= torch.cuda.device_count():
+            raise InputError(
+                f"--device {spec}: only {torch.cuda.device_count()} CUDA device(s) are visible"
+            )
+    elif dev.type == "mps":
+        if not torch.backends.mps.is_available():
+            raise InputError(f"--device {spec}: MPS is not available here; use --device cpu")
+    elif dev.type != "cpu":
+        raise InputError(f"--device {spec}: {dev.type} devices are not supported; use cpu or cuda")
+    return dev
+
+
+def _data_kind(spec: str) -> str:
+    """The kind of data: sim, bag (ROS 1 or 2, a file or a bag directory), directory, video."""
+    from torchratslam.readers.bags import is_bag
+
+    if spec.startswith("sim:"):
+        return "sim"
+    p = Path(spec)
+    if is_bag(p):
+        return "bag"
+    return "directory" if p.is_dir() else "video"
+
+
+def check_applicable(opts: RunOptions) -> None:
+    """Every option given must apply to the data: an option that would be ignored is an
+    error, not a silent no-op."""
+    kind = _data_kind(str(opts.data))
+    wrong = {
+        "sim": (
+            "odometry",
+            "groundtruth",
+            "image_topic",
+            "odom_topic",
+            "max_speed",
+            "max_turn_rate",
+        ),
+        "directory": ("image_topic", "odom_topic"),
+        "video": ("image_topic", "odom_topic"),
+        "bag": ("odometry", "groundtruth", "max_speed", "max_turn_rate"),
+    }[kind]
+    given = [f"--{k.replace('_', '-')}" for k in wrong if getattr(opts, k)]
+    if given:
+        raise InputError(
+            f"{' and '.join(given)} do{'es' if len(given) == 1 else ''} not apply to "
+            f"{kind} data ({opts.data}); remove {'it' if len(given) == 1 else 'them'}"
+        )
+
+
+def check_out(out: Path, *, resume: bool) -> None:
+    """OUT must be a writable directory (or creatable), with no file where a directory
+    goes and no file of ours' names that torchratslam did not write."""
+    if out.exists() and not out.is_dir():
+        raise InputError(f"--out {out}: exists and is not a directory; choose another path")
+    if out.exists():
+        state = out / STATE_DIR
+        if state.exists() and not state.is_dir():
+            raise InputError(
+                f"{state} exists and is not a directory (the map goes there); move it away"
+            )
+        for name in OUTPUT_FILES:
+            if (out / name).is_dir():
+                raise InputError(f"{out / name} is a directory (a file goes there); move it away")
+        own = Manifest(out).entries()
+        names = (*OUTPUT_FILES, *TUM_FILES, STATE_DIR, RUN_RECORD)
+        theirs = [n for n in names if (out / n).exists()]
+        theirs = [n for n in theirs if n not in own]
+        if theirs and not resume:
+            raise InputError(
+                f"{out} holds {', '.join(theirs)} that torchratslam did not write (or wrote "
+                "before it kept a manifest); refusing to replace them: choose another --out "
+                "or move them away"
+            )
+        probe = out
+    else:
+        probe = next((q for q in out.parents if q.exists()), Path("."))
+        if not probe.is_dir():
+            raise InputError(f"--out {out}: {probe} is not a directory")
+    if not os.access(probe, os.W_OK | os.X_OK):
+        raise InputError(f"--out {out}: {probe} is not writable; choose another --out")
+    state = out / STATE_DIR
+    if state.is_dir() and not os.access(state, os.W_OK | os.X_OK):
+        raise InputError(f"{state} is not writable, so the map cannot be replaced")

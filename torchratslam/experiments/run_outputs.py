@@ -1,0 +1,337 @@
+"""What a dataset run writes to OUT: ``metrics.json``, ``experiences.csv``,
+``trajectory.csv``, ``map.png``, ``pose_cells.png``, the saved state, and on request the
+TUM trajectories and the scale report; and the line ``torchratslam run`` prints.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import math
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ratslam_graph.atomic import Manifest, atomic_write_text
+from torchratslam.experiments import run_state
+from torchratslam.experiments.run_state import STATE_DIR, RunRecord, json_default
+from torchratslam.protocols import GroundTruthSource
+
+__all__ = [
+    "OUTPUT_FILES",
+    "SCALE_FILES",
+    "TUM_FILES",
+    "RunExtras",
+    "RunMetrics",
+    "summary_line",
+    "write_outputs",
+    "write_scale_report",
+    "write_tum",
+]
+
+OUTPUT_FILES = ("metrics.json", "experiences.csv", "trajectory.csv", "map.png", "pose_cells.png")
+TUM_FILES = ("tum_experience.txt", "tum_frame.txt", "tum_groundtruth.txt")
+SCALE_FILES = ("scale.json", "scale.md", "scale.png")
+
+
+@dataclass(frozen=True)
+class RunExtras:
+    """What metrics.json says of a run besides its counts (None: not said).
+
+    Attributes:
+        data: the data spec.
+        config: the config spec.
+        odometry: ``"visual"`` when the run estimated odometry from the images.
+        loaded: the stored maps the run localised in.
+        resumed_at_frame: the frame a resumed run went on from.
+        tum: the TUM files written, by estimate.
+        ate_experience_rmse_m: the ATE of ``tum_experience.txt``.
+        ate_frame_rmse_m: the ATE of ``tum_frame.txt``.
+    """
+
+    data: str
+    config: str
+    odometry: str | None = None
+    loaded: tuple[str, ...] | None = None
+    resumed_at_frame: int | None = None
+    tum: dict[str, str] | None = None
+    ate_experience_rmse_m: float | None = None
+    ate_frame_rmse_m: float | None = None
+
+
+@dataclass(frozen=True)
+class RunMetrics:
+    """A run's metrics: what ``metrics.json`` holds (fields that are None are left out),
+    plus the scale report's summary.
+
+    Attributes:
+        frames: frames mapped in all (a resumed run counts the first part too).
+        frames_this_run: frames this process mapped.
+        templates: the map's templates.
+        experiences: the map's experiences.
+        links: the map's links.
+        wall_s: this process's time.
+        fps: this process's frames per second.
+        ms_per_frame: per module, mean and median milliseconds per frame.
+        pipelined: whether the run used one thread per module.
+        backend: the experience map's relaxation backend.
+        odometry: the odometry source.
+        data: the data spec.
+        config: the config spec.
+        loaded: the stored maps the run localised in.
+        resumed_at_frame: the frame a resumed run went on from.
+        tum: the TUM files written, by estimate.
+        ate_experience_rmse_m: the ATE of ``tum_experience.txt``.
+        ate_frame_rmse_m: the ATE of ``tum_frame.txt``.
+        ate_rmse_m: the map's ATE (with ground truth).
+        dead_reckoning_ate_m: dead reckoning's ATE (with ground truth).
+        merges: a multisession run's merges.
+        partial: True for a run that stopped early.
+        stopped_at_frame: the frame a run that stopped early stopped at.
+        reason: why a run stopped early.
+        scale: the scale report's summary (``last_over_first``, ``peak_memory_mb``);
+            not in metrics.json.
+    """
+
+    frames: int
+    frames_this_run: int
+    templates: int
+    experiences: int
+    links: int
+    wall_s: float
+    fps: float
+    ms_per_frame: dict[str, dict[str, float]]
+    pipelined: bool
+    backend: str
+    odometry: str
+    data: str
+    config: str
+    loaded: tuple[str, ...] | None = None
+    resumed_at_frame: int | None = None
+    tum: dict[str, str] | None = None
+    ate_experience_rmse_m: float | None = None
+    ate_frame_rmse_m: float | None = None
+    ate_rmse_m: float | None = None
+    dead_reckoning_ate_m: float | None = None
+    merges: Any = None
+    partial: bool | None = None
+    stopped_at_frame: int | None = None
+    reason: str | None = None
+    scale: dict[str, Any] | None = None
+
+    def to_json(self) -> dict[str, Any]:
+        """What metrics.json holds: the fields that are not None, but the scale summary."""
+        return {k: v for k, v in asdict(self).items() if v is not None and k != "scale"}
+
+
+def _csv_text(header: list[str], rows: np.ndarray, int_cols: tuple[int, ...]) -> str:
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(header)
+    for row in rows.tolist():
+        w.writerow([int(v) if i in int_cols else repr(float(v)) for i, v in enumerate(row)])
+    return buf.getvalue()
+
+
+def _created_frames(em: Any, n: int) -> np.ndarray:
+    g = em.graph
+    return np.asarray([int(g.nodes[i].get("frame", -1)) for i in range(n)], dtype=np.int64)
+
+
+def _links(em: Any) -> np.ndarray:
+    if hasattr(em, "links") and callable(em.links):
+        lk = em.links()
+        return np.stack([lk["src"], lk["dst"]], axis=1).astype(np.int64)
+    return np.asarray(list(em.graph.edges()), dtype=np.int64).reshape(-1, 2)
+
+
+def _write_tables(slam: Any, out: Path) -> tuple[np.ndarray, np.ndarray]:
+    """``experiences.csv`` (final poses) and ``trajectory.csv``; returns both arrays."""
+    em = slam.experience_map
+    poses = np.asarray(em.poses, dtype=np.float64).reshape(-1, 3)
+    n = poses.shape[0]
+    exp_rows = np.column_stack([np.arange(n), poses, _created_frames(em, n)])
+    atomic_write_text(
+        out / "experiences.csv",
+        _csv_text(["id", "x", "y", "th", "created_frame"], exp_rows, (0, 4)),
+    )
+    traj = slam.trajectory()
+    atomic_write_text(
+        out / "trajectory.csv",
+        _csv_text(["frame", "t", "experience_id", "x", "y", "th"], traj, (0, 2)),
+    )
+    return poses, traj
+
+
+def _groundtruth_errors(
+    slam: Any, data: Any, traj: np.ndarray
+) -> tuple[np.ndarray | None, float | None, float | None]:
+    """The ground truth along the trajectory, the map's ATE and dead reckoning's ATE
+    (None where there is no ground truth)."""
+    from torchratslam.eval.metrics import interpolate_groundtruth
+
+    gt_xy = slam.groundtruth_poses()
+    gt_table = data.groundtruth() if isinstance(data, GroundTruthSource) else None
+    if gt_xy is None and gt_table is not None and len(gt_table) and traj.shape[0]:
+        gt_xy = interpolate_groundtruth(gt_table, traj[:, 1])
+    ate = dr = None
+    if gt_xy is not None and traj.shape[0] >= 2:
+        table = None if slam.groundtruth_poses() is not None else gt_table
+        ate = slam.ate(table)
+        dr = slam.dead_reckoning_ate(table)
+    return gt_xy, ate, dr
+
+
+def _jsonable(v: Any) -> Any:
+    return json.loads(json.dumps(v, default=json_default))
+
+
+def _metrics(
+    slam: Any,
+    result: Any,
+    extras: RunExtras,
+    ate: float | None,
+    dr: float | None,
+    info: dict[str, Any],
+) -> RunMetrics:
+    summary = result.timings
+    per_module = {
+        name: {"mean_ms": s["mean_ms"], "median_ms": s["median_ms"]} for name, s in summary.items()
+    }
+    merges = getattr(slam, "merges", None)  # a multisession run
+    partial = bool(info.get("partial"))
+    return RunMetrics(
+        frames=int(slam.frame_index),
+        frames_this_run=int(result.frames),
+        templates=int(result.templates),
+        experiences=int(result.experiences),
+        links=int(result.links),
+        wall_s=float(result.wall_s),
+        fps=float(result.fps),
+        ms_per_frame=per_module,
+        pipelined=bool(result.pipelined),
+        backend=slam.config.experience_map.exp_backend,
+        odometry=extras.odometry or slam.odometry_name,
+        data=extras.data,
+        config=extras.config,
+        loaded=extras.loaded,
+        resumed_at_frame=extras.resumed_at_frame,
+        tum=extras.tum,
+        ate_experience_rmse_m=extras.ate_experience_rmse_m,
+        ate_frame_rmse_m=extras.ate_frame_rmse_m,
+        ate_rmse_m=None if ate is None else float(ate),
+        dead_reckoning_ate_m=None if dr is None else float(dr),
+        merges=None if merges is None else _jsonable(merges),
+        partial=True if partial else None,
+        stopped_at_frame=int(info.get("stopped_at_frame", slam.frame_index)) if partial else None,
+        reason=str(info.get("reason", "")) if partial else None,
+    )
+
+
+def _write_figures(
+    slam: Any, out: Path, poses: np.ndarray, traj: np.ndarray, gt_xy: Any, data: Any, title: str
+) -> None:
+    """``map.png`` (with the aligned ground truth) and ``pose_cells.png``."""
+    from torchratslam.viz.plots import plot_map, plot_pose_cells
+
+    plot_map(
+        out / "map.png",
+        poses,
+        _links(slam.experience_map),
+        trajectory_xy=traj[:, 3:5] if gt_xy is not None else None,
+        groundtruth_xy=None if gt_xy is None else np.asarray(gt_xy)[:, :2],
+        world=getattr(data, "world", None),
+        title=title,
+    )
+    plot_pose_cells(out / "pose_cells.png", slam.activity, centres=slam.pc_log())
+
+
+def write_outputs(
+    slam: Any,
+    out: Path,
+    result: Any,
+    *,
+    data: Any,
+    extras: RunExtras,
+    record: RunRecord | None = None,
+    info: dict[str, Any] | None = None,
+) -> RunMetrics:
+    """Write state/ (first), experiences.csv, trajectory.csv, map.png, pose_cells.png and
+    metrics.json (last) for a run, finished or stopped (``info["partial"]``), each
+    atomically and recorded in OUT's manifest before it is written. With ``record`` (the
+    run's options) the state holds the history a resumed run needs and OUT/run.json the
+    record. Returns the metrics."""
+    info = dict(info or {"partial": False})
+    info.setdefault("frames", int(slam.frame_index))
+    out.mkdir(parents=True, exist_ok=True)
+    if record is not None:
+        run_state.save_run_state(slam, out, record, info)
+    else:
+        from torchratslam.maps.running import save_state
+
+        Manifest(out).add([STATE_DIR])
+        save_state(slam, out / STATE_DIR)
+    Manifest(out).add([*OUTPUT_FILES, STATE_DIR])
+    poses, traj = _write_tables(slam, out)
+    gt_xy, ate, dr = _groundtruth_errors(slam, data, traj)
+    metrics = _metrics(slam, result, extras, ate, dr, info)
+    _write_figures(slam, out, poses, traj, gt_xy, data, extras.data)
+    atomic_write_text(
+        out / "metrics.json",
+        json.dumps(metrics.to_json(), indent=2, default=json_default) + "\n",
+    )
+    return metrics
+
+
+def write_tum(slam: Any, out: Path, recorder: Any, data: Any) -> dict[str, Any]:
+    """The TUM files of ``--tum``; returns their :class:`RunExtras` fields (the files and
+    the ATE of each estimate on them)."""
+    from torchratslam.eval.tum import tum_ate, write_tum_files
+
+    table = data.groundtruth() if isinstance(data, GroundTruthSource) else None
+    files = write_tum_files(slam, out, recorder=recorder, groundtruth=table)
+    fields: dict[str, Any] = {"tum": {k: p.name for k, p in files.items()}}
+    if "groundtruth" in files and slam.trajectory().shape[0] >= 2:
+        for name in ("experience", "frame"):
+            if name in files:
+                fields[f"ate_{name}_rmse_m"] = tum_ate(files["groundtruth"], files[name])
+    return fields
+
+
+def write_scale_report(recorder: Any, slam: Any, out: Path, label: str) -> dict[str, Any]:
+    """OUT/scale.json, scale.md and scale.png of a run recorded with ``scale_report``;
+    returns the summary (``last_over_first``, ``peak_memory_mb``)."""
+    from torchratslam.eval.scale import format_scale_table
+    from torchratslam.viz.scale import plot_scale
+
+    report = recorder.report(slam.timings, parts=min(10, len(recorder.templates)))
+    atomic_write_text(out / "scale.json", json.dumps(report, indent=2) + "\n")
+    atomic_write_text(out / "scale.md", format_scale_table(report, title=label) + "\n")
+    plot_scale(out / "scale.png", {"torchratslam": report}, title=label)
+    return {k: report[k] for k in ("last_over_first", "peak_memory_mb")}
+
+
+def summary_line(metrics: RunMetrics, out: Path) -> str:
+    """The line ``torchratslam run`` prints."""
+    m = metrics
+    line = (
+        f"{m.frames_this_run} frames in {m.wall_s:.1f} s "
+        f"({m.fps:.1f} frames/s): {m.templates} templates, "
+        f"{m.experiences} experiences, {m.links} links"
+    )
+    if m.ate_rmse_m is not None:
+        ate = m.ate_rmse_m
+        line += f", ATE {ate:.3f} m" if math.isfinite(ate) else ""
+        if m.ate_frame_rmse_m is not None:
+            line += f" (per-frame pose {m.ate_frame_rmse_m:.3f} m)"
+        dr = m.dead_reckoning_ate_m
+        if dr is not None and math.isfinite(dr):
+            line += f" vs dead reckoning {dr:.3f} m"
+    if m.loaded is not None:  # a multisession run
+        merges = m.merges
+        n_merges = len(merges) if isinstance(merges, (list, dict)) else 0
+        line += f", {n_merges} merge{'s' if n_merges != 1 else ''}"
+    return f"{line}; wrote {out}"

@@ -1,0 +1,168 @@
+"""The template bank: every template in one preallocated tensor, with its metadata."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Mapping
+
+import torch
+from torch import nn
+
+from torchratslam.errors import ConfigError
+from torchratslam.local_view.preprocessing import check_finite
+from torchratslam.shapes import check_shape
+
+__all__ = ["TemplateBank"]
+
+
+class TemplateBank(nn.Module):
+    """All templates in one preallocated tensor that grows by doubling.
+
+    Row ``i`` holds template id ``i``. Per template the bank also keeps its mean, its
+    creation frame and any small summaries a matcher asks for (computed once, when the
+    template is added; see :meth:`TemplateMatcher.make_bank
+    <torchratslam.local_view.matcher.TemplateMatcher.make_bank>`).
+
+    The rows, means, frames and summaries are non-persistent buffers (allocated
+    ``capacity`` rows at a time): the module that owns the bank stores the templates in
+    its own state, so the bank adds nothing to ``state_dict()``.
+
+    Args:
+        y_size: template height (rows).
+        x_size: template width (columns).
+        summaries: function computing the summaries of a batch ``(K, Y, X)`` of templates.
+        summary_shapes: name -> per-template shape of each summary.
+        capacity: initial number of rows.
+        dtype: template dtype.
+        device: template device.
+    """
+
+    # Buffers allocated by _alloc: the rows, their means, frames and the summaries.
+    _data: torch.Tensor
+    _means: torch.Tensor
+    _frames: torch.Tensor
+
+    def __init__(
+        self,
+        y_size: int,
+        x_size: int,
+        *,
+        summaries: Callable[[torch.Tensor], dict[str, torch.Tensor]] | None = None,
+        summary_shapes: Mapping[str, tuple[int, ...]] | None = None,
+        capacity: int = 64,
+        dtype: torch.dtype = torch.float32,
+        device: torch.device | str | None = None,
+    ) -> None:
+        if y_size <= 0 or x_size <= 0:
+            raise ConfigError(f"template size must be positive, got {x_size}x{y_size}")
+        super().__init__()
+        self.y_size, self.x_size = int(y_size), int(x_size)
+        self._summarise = summaries
+        self._summary_shapes = dict(summary_shapes or {})
+        self.dtype, self.device = dtype, torch.device(device) if device is not None else None
+        self._n = 0
+        self._capacity = 0
+        self._alloc(max(1, int(capacity)))
+
+    def _shapes(self) -> dict[str, tuple[int, ...]]:
+        return {"data": (self.y_size, self.x_size), "means": (), **self._summary_shapes}
+
+    def _alloc(self, capacity: int) -> None:
+        for name, shape in self._shapes().items():
+            tensor = torch.zeros(capacity, *shape, dtype=self.dtype, device=self.device)
+            old = self._buffers.get("_" + name)
+            if old is not None:
+                tensor[: self._n] = old[: self._n]
+            self.register_buffer("_" + name, tensor, persistent=False)
+        frames = torch.full((capacity,), -1, dtype=torch.int64, device=self.device)
+        old = self._buffers.get("_frames")
+        if old is not None:
+            frames[: self._n] = old[: self._n]
+        self.register_buffer("_frames", frames, persistent=False)
+        self._capacity = capacity
+
+    @property
+    def capacity(self) -> int:
+        """Rows allocated (grows by doubling)."""
+        return self._capacity
+
+    @property
+    def summary_shapes(self) -> dict[str, tuple[int, ...]]:
+        """Name -> per-template shape of each summary."""
+        return dict(self._summary_shapes)
+
+    def __len__(self) -> int:
+        return self._n
+
+    @property
+    def data(self) -> torch.Tensor:
+        """The templates, shape ``(N, Y, X)`` (a view; do not modify)."""
+        return self._data[: self._n]
+
+    @property
+    def means(self) -> torch.Tensor:
+        """Mean of each template, shape ``(N,)``."""
+        return self._means[: self._n]
+
+    @property
+    def frames(self) -> torch.Tensor:
+        """Frame at which each template was created (-1 if unknown), shape ``(N,)``."""
+        return self._frames[: self._n]
+
+    @property
+    def ids(self) -> torch.Tensor:
+        """Template ids, shape ``(N,)`` (the row numbers)."""
+        return torch.arange(self._n, device=self.device)
+
+    def summary(self, name: str) -> torch.Tensor:
+        """The summary ``name`` of every template (a view; do not modify).
+
+        Shape:
+            ``(N, *summary_shapes[name])``.
+        """
+        if name not in self._summary_shapes:
+            raise KeyError(f"the bank keeps no summary {name!r} ({sorted(self._summary_shapes)})")
+        return self._buffer(name)[: self._n]
+
+    def _buffer(self, name: str) -> torch.Tensor:
+        buf = self._buffers["_" + name]
+        assert buf is not None  # allocated by _alloc for every name of _shapes()
+        return buf
+
+    def bytes_per_template(self) -> int:
+        """Memory per stored template: data, summaries and metadata."""
+        floats = sum(math.prod(shape) for shape in self._shapes().values())
+        return floats * (torch.finfo(self.dtype).bits // 8) + 8
+
+    def append(self, templates: torch.Tensor, frames: torch.Tensor | int | None = None) -> range:
+        """Append templates; returns their ids.
+
+        Args:
+            templates: the templates.
+            frames: creation frame of each (or one for all); -1 if None.
+
+        Shape:
+            templates: ``(K, Y, X)`` or ``(Y, X)``.
+        """
+        t = torch.as_tensor(templates, dtype=self.dtype, device=self.device)
+        if t.ndim == 2:
+            t = t[None]
+        check_shape(t, ("K", self.y_size, self.x_size), "templates")
+        check_finite(t, "templates")
+        k = t.shape[0]
+        if self._n + k > self._capacity:
+            cap = self._capacity
+            while cap < self._n + k:
+                cap *= 2
+            self._alloc(cap)
+        sl = slice(self._n, self._n + k)
+        self._data[sl] = t
+        self._means[sl] = t.mean(dim=(1, 2))
+        if self._summarise is not None:
+            for name, value in self._summarise(t).items():
+                self._buffer(name)[sl] = value
+        if frames is None:
+            frames = -1
+        self._frames[sl] = torch.as_tensor(frames, dtype=torch.int64, device=self.device)
+        self._n += k
+        return range(self._n - k, self._n)

@@ -1,0 +1,219 @@
+"""MBARAM's match and vigilance math: per-channel node statistics, the log match
+``log M_j`` with the vigilance test, the choice of the winner and the learning rule."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+
+import torch
+
+from ratslam_graph.geometry import wrap_angle
+from torchratslam.errors import ConfigError
+from torchratslam.mbaram.params import MBARAMParams
+
+__all__ = ["ChannelNodes", "MatchResult", "learn_node", "log_match", "select"]
+
+_LOG_2PI = math.log(2.0 * math.pi)
+
+
+@dataclass(frozen=True)
+class MatchResult:
+    """The outcome of one :meth:`MBARAM.learn` or :meth:`MBARAM.localise` call.
+
+    Attributes:
+        node: the winning node (the new one when ``is_new``), or -1 when localisation
+            found no node that passes vigilance.
+        is_new: a new node was created because every existing node failed vigilance.
+        rank: position of the winner in the candidate order (0 = the MAP node; -1 when
+            new or none).
+        log_m: ``log M_J`` of the winner (nan when new or none).
+        best: the MAP node before vigilance (-1 for an empty map).
+    """
+
+    node: int
+    is_new: bool = False
+    rank: int = -1
+    log_m: float = float("nan")
+    best: int = -1
+
+
+class ChannelNodes:
+    """Node statistics of one channel (means, covariances, their logs), with room that
+    doubles as nodes are added."""
+
+    def __init__(
+        self,
+        dim: int,
+        full: bool,
+        angular: Sequence[int],
+        floor: float,
+        dtype: torch.dtype,
+        device: torch.device,
+    ) -> None:
+        self.dim = dim
+        self.full = full
+        self.floor = floor
+        self.log_floor = math.log(floor)
+        self.ang = torch.zeros(dim, dtype=torch.bool, device=device)
+        if len(angular):
+            self.ang[list(angular)] = True
+        self.has_ang = bool(self.ang.any())
+        self.dtype, self.device = dtype, device
+        self.mean = torch.empty(0, dim, dtype=dtype, device=device)
+        shape = (0, dim, dim) if full else (0, dim)
+        self.cov = torch.empty(shape, dtype=dtype, device=device)
+        self.chol = torch.empty(shape if full else (0,), dtype=dtype, device=device)
+        self.logcov = torch.empty((0,) if full else (0, dim), dtype=dtype, device=device)
+        self.logdet = torch.empty(0, dtype=dtype, device=device)
+
+    def grow(self, capacity: int) -> None:
+        """Room for ``capacity`` nodes (the stored ones kept)."""
+
+        def bigger(t: torch.Tensor) -> torch.Tensor:
+            out = torch.zeros((capacity, *t.shape[1:]), dtype=t.dtype, device=t.device)
+            out[: t.shape[0]] = t
+            return out
+
+        self.mean, self.cov, self.logdet = bigger(self.mean), bigger(self.cov), bigger(self.logdet)
+        if self.full:
+            self.chol = bigger(self.chol)
+        else:
+            self.logcov = bigger(self.logcov)
+
+    def diff(self, x: torch.Tensor, n: int) -> torch.Tensor:
+        """``x - mu_j`` of the first ``n`` nodes, angular dimensions wrapped. Shape: (n, D)."""
+        d = x - self.mean[:n]
+        if self.has_ang:
+            d = torch.where(self.ang, wrap_angle(d), d)
+        return d
+
+    def maha(self, d: torch.Tensor, n: int) -> torch.Tensor:
+        """Squared Mahalanobis distances ``d_j^T Sigma_j^-1 d_j`` (full covariance), (n,)."""
+        z = torch.linalg.solve_triangular(self.chol[:n], d.unsqueeze(-1), upper=False)
+        return z.squeeze(-1).square().sum(-1)
+
+
+def log_match(
+    channels: Mapping[str, ChannelNodes],
+    x: Mapping[str, torch.Tensor],
+    names: Sequence[str],
+    weights: Mapping[str, float],
+    params: MBARAMParams,
+    counts: torch.Tensor,
+    prior: torch.Tensor,
+    device: torch.device,
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """``log M_j`` (Eqs. 1-6 in log space) and the vigilance pass mask (Eqs. 7-8) of
+    every node.
+
+    Args:
+        channels: the node statistics per channel.
+        x: the input per channel. Shape: (D_k,) each.
+        names: the channels that compete; their weights are renormalised.
+        weights: channel weights alpha_k.
+        params: the parameters (S_MAX, outlier model, vigilance variant).
+        counts: ``N_j`` of every node. Shape: (N,).
+        prior: ``P(w_j)`` of every node. Shape: (N,).
+        device: the device of the node statistics.
+
+    Returns:
+        ``log M_j`` and the pass mask, both of shape (N,).
+    """
+    n = len(counts)
+    logprior = prior.log()
+    a = counts / (counts + 1.0)  # N/(N+1)
+    b = 1.0 / (counts + 1.0)  # 1/(N+1)
+    wsum = sum(weights[k] for k in names)
+    if wsum <= 0:
+        raise ConfigError(f"MBARAM channels {list(names)} all have weight 0; use others")
+    log_terms = []
+    passed = torch.ones(n, dtype=torch.bool, device=device)
+    log_smax = {k: math.log(params.s_max) for k in names}
+    if "odometry" in log_smax:
+        log_smax["odometry"] = math.log(params.s_max_odometry)
+    for k in names:
+        ch = channels[k]
+        d = ch.diff(x[k], n)  # (n, D)
+        if ch.full:
+            q = ch.maha(d, n)
+        else:
+            r = d.square_().div_(ch.cov[:n])  # (x - mu)^2 / sigma^2 per dimension
+            q = r.sum(-1)
+        eps = params.laser_outlier
+        if eps > 0 and k != "odometry" and not ch.full:
+            # per beam log((1 - eps) N(x; mu, s2) + eps / R): a beam blocked by a
+            # pedestrian or a moved box costs at most -log(eps / R), not (x - mu)^2 / s2
+            log_u = math.log(eps / (params.laser_max_range * params.laser_scale))
+            logn = (r + ch.logcov[:n] + _LOG_2PI).mul_(-0.5).add_(math.log1p(-eps))
+            logp = torch.logaddexp(logn, torch.full_like(logn, log_u)).sum(-1)
+        else:
+            logp = -0.5 * (ch.dim * _LOG_2PI + ch.logdet[:n] + q)  # Eq. 5
+        joint = logp + logprior
+        logpost = joint - torch.logsumexp(joint, 0)  # Eqs. 1, 4
+        if weights[k] > 0:
+            log_terms.append(math.log(weights[k] / wsum) + logpost)
+        if params.vigilance == "current":
+            logs = ch.logdet[:n]
+        elif ch.full:
+            # det(a Sigma + b d'd'^T), d' = a d: matrix determinant lemma (Eq. 10)
+            logs = ch.dim * a.log() + ch.logdet[:n] + torch.log1p(a * b * q)
+        else:
+            # Eq. 10 per dimension: a s2 + b (a d)^2 = a s2 (1 + a b d^2 / s2), floored
+            # as learning floors it; log S' = sum of the logs (Eq. 8)
+            logv = r.mul_((a * b)[:, None]).log1p_().add_(ch.logcov[:n]).add_(a.log()[:, None])
+            logs = logv.clamp_min_(ch.log_floor).sum(-1)
+        passed &= logs <= log_smax[k]  # Eq. 7
+    log_m = torch.logsumexp(torch.stack(log_terms), 0)  # Eq. 3 in log space
+    return log_m, passed
+
+
+def select(log_m: torch.Tensor, passed: torch.Tensor) -> MatchResult:
+    """The best node that passes vigilance ("reset the winner and try the next best",
+    without a loop over nodes): candidates ordered once by ``log M_j`` (Eq. 6).
+
+    Shape:
+        log_m, passed: (N,) with N >= 1.
+    """
+    order = torch.argsort(log_m, descending=True, stable=True)  # Eq. 6, then next best
+    ok = passed[order]
+    best = int(order[0])
+    if not bool(ok.any()):
+        return MatchResult(-1, best=best)
+    rank = int(torch.argmax(ok.to(torch.int8)))
+    node = int(order[rank])
+    return MatchResult(node, rank=rank, log_m=float(log_m[node]), best=best)
+
+
+def learn_node(ch: ChannelNodes, j: int, x: torch.Tensor, a: float, b: float) -> None:
+    """Learn input ``x`` into node ``j`` of one channel (Eqs. 9-10), in place.
+
+    Args:
+        ch: the channel's node statistics.
+        j: the node.
+        x: the input. Shape: (D,).
+        a: ``N_j / (N_j + 1)``.
+        b: ``1 / (N_j + 1)``.
+    """
+    floor = ch.floor
+    d = x - ch.mean[j]
+    if ch.has_ang:
+        d = torch.where(ch.ang, wrap_angle(d), d)
+    mu = ch.mean[j] + b * d  # Eq. 9
+    if ch.has_ang:
+        mu = torch.where(ch.ang, wrap_angle(mu), mu)
+    dn = a * d  # x - mu_new
+    if ch.full:
+        cov = a * ch.cov[j] + b * torch.outer(dn, dn)  # Eq. 10 (full)
+        diag = cov.diagonal()
+        diag.clamp_(min=floor)
+        chol = torch.linalg.cholesky(cov)
+        ch.cov[j], ch.chol[j] = cov, chol
+        ch.logdet[j] = 2.0 * chol.diagonal().log().sum()
+    else:
+        var = (a * ch.cov[j] + b * dn.square()).clamp_min(floor)  # Eq. 10 (x I)
+        ch.cov[j] = var
+        ch.logcov[j] = var.log()
+        ch.logdet[j] = ch.logcov[j].sum()
+    ch.mean[j] = mu

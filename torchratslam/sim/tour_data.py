@@ -1,0 +1,356 @@
+"""The simulator's tours as data (read by :func:`torchratslam.sim.tour_builder.build_tour`).
+
+* ``virtual_tour`` (multisession paper, Fig. 5): an ellipse (60.7 m lap) in a hall;
+  256x64 panoramic, 1 Hz, 150 frames per lap. session1: a 3/4 lap (113 frames);
+  session2: 2.9 laps from an unmapped point 0.873 lap round, reaching session1's
+  start after 19 frames and replaying its frames from there (436 frames).
+* ``lab_tour`` (Fig. 6): two rectangles forming a digital "8"; 640x480 forward camera
+  (50 degrees), 1 Hz, 0.25 m/s. session1: two CCW laps of the small rectangle (153);
+  session2: 1.9 CCW laps of the large one from an unmapped point (206).
+* ``irat_like`` (Fig. 7): a 2 x 2 block road network at iRat scale (2.4 x 1.6 m);
+  160x96 forward camera (75 degrees), 10 Hz, 0.2 m/s. session1-4: one CCW lap around
+  each block (194 each); session5: in along an unmapped spur, then the outer loop,
+  which joins all four (433).
+* ``loop``: a corridor loop (38.3 m lap), 256x64 panoramic, 5 Hz, lasers on.
+  session1: 6 laps, 1781 frames.
+* ``suburb`` (St Lucia-like): an 8 x 8 block street grid (40 m blocks, 12 m streets,
+  buildings of varied heights and facades); a car with a 128x64 forward camera
+  (60 degrees, 1.5 m up) at 10 m/s, 10 Hz; 20000 frames driving most streets several
+  times in both directions.
+"""
+
+from __future__ import annotations
+
+from torchratslam.sim.tour_spec import (
+    Box,
+    CameraSpec,
+    EllipseRoute,
+    GridDriveRoute,
+    LapFraction,
+    Leg,
+    NoiseSpec,
+    Opt,
+    PolygonRoute,
+    Polyline,
+    SessionSpec,
+    Spacing,
+    StreetGrid,
+    TourSpec,
+    WorldSpec,
+)
+
+__all__ = ["IRAT_LIKE", "LAB_TOUR", "LOOP", "SUBURB", "TOUR_SPECS", "VIRTUAL_TOUR"]
+
+# smooth textures (the paper's virtual world has smooth imagery): turning by one template
+# column (2.8 degrees) changes a view far less than vt_match_threshold, so the published
+# vt_step_match = 2 works; the far hall walls get 3x wider features
+VIRTUAL_TOUR = TourSpec(
+    name="virtual_tour",
+    description="multisession Fig. 5: ellipse, 3/4 lap, then 2.9 laps from an unmapped point",
+    options={"frames_per_lap": 150, "hz": 1.0, "session2_start": 0.873},
+    positive=(("frames_per_lap", 3.0), ("hz", 0.0)),
+    world=WorldSpec(
+        walls=(
+            Polyline(((-18, -13), (18, -13), (18, 13), (-18, 13)), scale=3.0),
+            Box(0.0, 0.0, 10.0, 4.0, height=3.0),
+            Box(-7.5, 0.0, 1.0, 1.0, height=2.5),
+            Box(7.5, 0.5, 1.2, 1.2, height=2.5),
+            Box(0.0, 10.0, 2.0, 1.0, height=2.5),
+            Box(-9.0, -9.5, 1.5, 1.5, height=2.5),
+            Box(10.0, -9.0, 1.0, 2.0, height=2.5),
+            Box(14.5, 2.0, 1.0, 1.0, height=2.5),
+            Box(-14.5, -3.0, 1.0, 1.5, height=2.5),
+            Box(4.0, -10.5, 1.0, 1.0, height=2.5),
+        ),
+        wall_height=5.0,
+        style="smooth",
+    ),
+    routes={"ellipse": EllipseRoute(12.0, 7.0, start_deg=-90.0)},
+    sessions=(
+        SessionSpec("session1", "ellipse", laps=0.75),
+        SessionSpec(
+            "session2",
+            "ellipse",
+            laps=2.9,
+            start=LapFraction("session2_start", low=0.75, high=1.0, default=0.873),
+        ),
+    ),
+    spacing=Spacing("per_lap"),
+    camera=CameraSpec("panoramic", width=256, height=64, cam_height=1.0),
+    noise=NoiseSpec(
+        scale_error=0.03,
+        rot_scale_error=0.01,
+        heading_bias=0.001,
+        trans_noise=0.01,
+        rot_noise=0.005,
+    ),
+    lasers=False,
+    main_route="ellipse",
+    obstacle_offset=2.5,
+    clearance=1.5,
+    # continuous run: on along the ellipse through the unmapped quarter to session 2
+    bridges=((Leg("ellipse"),),),
+)
+
+LAB_TOUR = TourSpec(
+    name="lab_tour",
+    description="multisession Fig. 6: two CCW laps of the small rectangle, 1.9 of the large",
+    options={"speed": 0.25, "hz": 1.0},
+    positive=(("speed", 0.0), ("hz", 0.0)),
+    world=WorldSpec(
+        walls=(
+            Polyline(((-2.5, -2.5), (8.5, -2.5), (8.5, 10.5), (-2.5, 10.5))),
+            Box(3.0, 6.0, 4.0, 2.0),  # desks inside the small loop
+            Box(3.0, 2.0, 4.0, 2.0),  # desks inside the lower loop
+            Box(-2.0, 2.0, 0.8, 2.0, height=1.2),
+            Box(8.0, 6.5, 0.8, 1.6, height=1.2),
+            Box(4.0, 10.0, 2.0, 0.8, height=1.2),
+            Box(1.0, -2.0, 1.6, 0.8, height=1.2),
+            Box(7.5, -1.5, 1.0, 1.0, height=1.2),
+            Box(-1.7, 9.5, 1.2, 1.2, height=1.2),
+        ),
+        wall_height=2.5,
+    ),
+    routes={
+        "small": PolygonRoute(((0, 4), (6, 4), (6, 8), (0, 8)), radius=0.6),
+        "large": PolygonRoute(((0, 0), (6, 0), (6, 8), (0, 8)), radius=0.6),
+    },
+    # the small loop starts mid-bar heading +x; the large one mid-bottom heading +x
+    sessions=(
+        SessionSpec("session1", "small", laps=2.0, start=(3.0, 4.0)),
+        SessionSpec("session2", "large", laps=1.9, start=(3.0, 0.0)),
+    ),
+    spacing=Spacing("speed"),
+    camera=CameraSpec("forward", width=640, height=480, fov_deg=50.0, cam_height=0.3),
+    noise=NoiseSpec(
+        scale_error=0.03,
+        rot_scale_error=0.02,
+        heading_bias=0.002,
+        trans_noise=0.01,
+        rot_noise=0.01,
+    ),
+    lasers=False,
+    main_route="large",
+    obstacle_size=0.6,
+    obstacle_offset=0.9,
+    pedestrian_offset=0.6,
+    obstacle_height=1.0,
+    clearance=0.8,
+    # continuous run: on round the small rectangle to its left side (shared with the large
+    # one, same direction), then down the large one to session 2's start
+    bridges=((Leg("small", None, (0.0, 6.0)), Leg("large", (0.0, 6.0), None)),),
+)
+
+# irat_like is drawn at 10x (_GX, _GY, _HALF, _SPUR) and scaled by _K to iRat size
+_K = 0.1
+_GX, _GY, _HALF, _SPUR = 12.0, 8.0, 1.5, 6.0
+_R = 0.8 * _K
+
+
+def _irat_block(bx: int, by: int) -> PolygonRoute:
+    x0, y0 = _GX * bx * _K, _GY * by * _K
+    return PolygonRoute(
+        ((x0, y0), (x0 + _GX * _K, y0), (x0 + _GX * _K, y0 + _GY * _K), (x0, y0 + _GY * _K)),
+        radius=_R,
+    )
+
+
+IRAT_LIKE = TourSpec(
+    name="irat_like",
+    description="multisession Fig. 7: four inner loops, then the outer loop joining them",
+    options={"speed": 0.2, "hz": 10.0},
+    positive=(("speed", 0.0), ("hz", 0.0)),
+    world=WorldSpec(
+        walls=(
+            # outer wall with an opening on the left road where a spur (driveway) joins
+            Polyline(
+                (
+                    (-_HALF, _GY - _HALF),
+                    (-_HALF, -_HALF),
+                    (2 * _GX + _HALF, -_HALF),
+                    (2 * _GX + _HALF, 2 * _GY + _HALF),
+                    (-_HALF, 2 * _GY + _HALF),
+                    (-_HALF, _GY + _HALF),
+                ),
+                closed=False,
+            ),
+            Polyline(
+                (
+                    (-_HALF, _GY - _HALF),
+                    (-_HALF - _SPUR, _GY - _HALF),
+                    (-_HALF - _SPUR, _GY + _HALF),
+                    (-_HALF, _GY + _HALF),
+                ),
+                closed=False,
+            ),
+            *(
+                Box(_GX * (bx + 0.5), _GY * (by + 0.5), _GX - 2 * _HALF, _GY - 2 * _HALF)
+                for bx in range(2)
+                for by in range(2)
+            ),
+        ),
+        wall_height=3.0,
+        scale=_K,
+    ),
+    routes={
+        "block1": _irat_block(0, 0),
+        "block2": _irat_block(1, 0),
+        "block3": _irat_block(1, 1),
+        "block4": _irat_block(0, 1),
+        "outer": PolygonRoute(
+            ((0, 0), (2 * _GX * _K, 0), (2 * _GX * _K, 2 * _GY * _K), (0, 2 * _GY * _K)),
+            radius=_R,
+        ),
+        # session 5 comes in along the spur (unmapped), turns south, drives the outer loop
+        # and passes the junction again
+        "session5": PolygonRoute(
+            (
+                (-(_HALF + _SPUR - 1.5) * _K, _GY * _K),
+                (0, _GY * _K),
+                (0, 0),
+                (2 * _GX * _K, 0),
+                (2 * _GX * _K, 2 * _GY * _K),
+                (0, 2 * _GY * _K),
+                (0, _GY * _K - 1.5 * _HALF * _K),
+            ),
+            radius=_R,
+            closed=False,
+        ),
+    },
+    sessions=(
+        SessionSpec("session1", "block1", start=(_GX * _K / 2, 0.0)),
+        SessionSpec("session2", "block2", start=(1.5 * _GX * _K, 0.0)),
+        SessionSpec("session3", "block3", start=(1.5 * _GX * _K, 2 * _GY * _K)),
+        SessionSpec("session4", "block4", start=(_GX * _K / 2, 2 * _GY * _K)),
+        SessionSpec("session5", "session5", count="floor"),
+    ),
+    spacing=Spacing("speed"),
+    camera=CameraSpec("forward", width=160, height=96, fov_deg=75.0, cam_height=0.06),
+    noise=NoiseSpec(
+        scale_error=0.03,
+        rot_scale_error=0.02,
+        heading_bias=0.005,
+        trans_noise=0.005,
+        rot_noise=0.02,
+    ),
+    lasers=False,
+    main_route="outer",
+    obstacle_size=0.06,
+    obstacle_offset=0.09,
+    pedestrian_offset=0.07,
+    obstacle_height=0.15,
+    scale=_K,
+    clearance=0.1,
+    # continuous run: sessions 1-4 end where the next begins along the outer loop's straight
+    # roads; after session 4 the robot drives down the left road, turns into the spur,
+    # drives out to session 5's start and turns on the spot
+    bridge_routes={
+        "into_spur": PolygonRoute(
+            ((0.0, _GY * _K + 4 * _R), (0.0, _GY * _K), (-(_HALF + _SPUR - 1.5) * _K, _GY * _K)),
+            radius=_R,
+            closed=False,
+        )
+    },
+    bridges=(
+        (Leg("outer"),),
+        (Leg("outer"),),
+        (Leg("outer"),),
+        (
+            Leg("outer", None, (0.0, _GY * _K + 4 * _R)),
+            Leg("into_spur", (0.0, _GY * _K + 4 * _R), None),
+        ),
+    ),
+)
+
+LOOP = TourSpec(
+    name="loop",
+    description="single-session corridor loop (the classic loop-closure test), lasers on",
+    options={"laps": 6.0, "frames": None, "hz": 5.0},
+    positive=(("laps", 0.0), ("hz", 0.0), ("frames", 1.0)),
+    world=WorldSpec(
+        walls=(
+            Polyline(((-1.25, -1.25), (13.25, -1.25), (13.25, 9.25), (-1.25, 9.25))),
+            Polyline(((1.25, 1.25), (10.75, 1.25), (10.75, 6.75), (1.25, 6.75))),
+            # cabinets, pillars and recess frames along the walls (laser and visual landmarks)
+            Box(3.0, -1.0, 1.6, 0.5, height=1.8),
+            Box(8.5, -1.0, 0.5, 0.5, height=1.8),
+            Box(13.0, 3.0, 0.5, 1.2, height=1.8),
+            Box(6.0, 9.0, 2.0, 0.5, height=1.8),
+            Box(-1.0, 5.5, 0.5, 1.8, height=1.8),
+            Box(1.0, 4.0, 0.5, 0.5, height=1.8),
+            Box(6.0, 1.0, 1.0, 0.5, height=1.8),
+            Box(11.0, 5.0, 0.5, 0.8, height=1.8),
+            Box(9.5, 9.0, 0.6, 0.5, height=1.8),
+            Box(-1.0, 1.5, 0.5, 0.6, height=1.8),
+            Box(4.0, 7.0, 0.8, 0.5, height=1.8),
+        ),
+        wall_height=2.5,
+    ),
+    routes={"corridor": PolygonRoute(((0, 0), (12, 0), (12, 8), (0, 8)), radius=1.0)},
+    sessions=(SessionSpec("session1", "corridor"),),
+    spacing=Spacing("laps", frames_per=1780, laps_per=6),
+    camera=CameraSpec("panoramic", width=256, height=64, cam_height=1.0),
+    noise=NoiseSpec(
+        scale_error=0.02,
+        rot_scale_error=0.008,
+        heading_bias=0.001,
+        trans_noise=0.02,
+        rot_noise=0.02,
+    ),
+    lasers=True,
+    main_route="corridor",
+    obstacle_size=0.5,
+    obstacle_offset=0.8,
+    pedestrian_offset=0.7,
+    obstacle_height=1.2,
+    clearance=0.7,
+)
+
+SUBURB = TourSpec(
+    name="suburb",
+    description=(
+        "suburb: {blocks} x {blocks} city blocks, a car drives most streets several "
+        "times both ways (St Lucia-like)"
+    ),
+    options={
+        "blocks": 8,
+        "block_size": 40.0,
+        "street_width": 12.0,
+        "frames": 20000,
+        "speed": 10.0,
+        "hz": 10.0,
+    },
+    positive=(
+        ("blocks", 0.0),
+        ("block_size", 0.0),
+        ("street_width", 0.0),
+        ("speed", 0.0),
+        ("hz", 0.0),
+        ("frames", 1.0),
+    ),
+    world=WorldSpec(walls=(StreetGrid(),), wall_height=8.0, floor=0.4, ceiling=0.9),
+    routes={"drive": GridDriveRoute(radius=Opt("street_width", div=3.0))},
+    sessions=(SessionSpec("session1", "drive"),),
+    spacing=Spacing("frames"),
+    camera=CameraSpec("forward", width=128, height=64, fov_deg=60.0, cam_height=1.5),
+    noise=NoiseSpec(
+        scale_error=0.02,
+        rot_scale_error=0.01,
+        heading_bias=0.001,
+        trans_noise=0.05,
+        rot_noise=0.01,
+    ),
+    lasers=False,
+    main_route="drive",
+    obstacle_size=2.0,
+    obstacle_offset=Opt("street_width", div=2.0, add=-1.5),
+    pedestrian_offset=Opt("street_width", div=2.0, add=-1.0),
+    obstacle_height=1.5,
+    scale=4.0,
+    clearance=Opt("street_width", div=2.0, add=-0.5),
+)
+
+#: Every tour by name.
+TOUR_SPECS: dict[str, TourSpec] = {
+    t.name: t for t in (VIRTUAL_TOUR, LAB_TOUR, IRAT_LIKE, LOOP, SUBURB)
+}
