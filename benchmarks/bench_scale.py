@@ -16,7 +16,8 @@ current at every frame, aligned to ground truth). The figure of cost per frame a
 map size is written to ``OUT/scale_suburb.png``.
 
 Environment: ``BENCH_SCALE_FRAMES`` (default 20000; ``BENCH_QUICK=1``: 2000),
-``OPENRATSLAM_BUILD`` (the C++ build directory), ``BENCH_OUT`` (default ``out/bench``).
+``OPENRATSLAM_BUILD`` (the C++ build directory; default ``build/openratslam``),
+``BENCH_OUT`` (default ``out/bench`` under the repository root).
 """
 
 from __future__ import annotations
@@ -32,6 +33,7 @@ from typing import Any
 
 import numpy as np
 
+from benchmarks.openratslam import ROOT, find_build
 from torchratslam.config import RatSLAMConfig
 from torchratslam.eval.metrics import ate_rmse
 from torchratslam.eval.scale import format_scale_table, read_openratslam_trace
@@ -96,37 +98,42 @@ def _ate_from_ids(data: Path, exp_ids: np.ndarray, exp_xy: dict[int, np.ndarray]
     return float(ate_rmse(est, gt[: len(exp_ids)][ok]))
 
 
+_PEAK_PROBE = (
+    "import resource, subprocess, sys\n"
+    "with open(sys.argv[1], 'w') as log:\n"
+    "    subprocess.run(sys.argv[2:], check=True, stdout=log)\n"
+    "print(resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss)\n"
+)
+
+
+def run_peak(cmd: list[str], log: Path) -> tuple[float, float]:
+    """Run ``cmd`` (stdout to ``log``); its wall time (s) and peak memory (MiB).
+
+    A small Python process runs the command, so ``RUSAGE_CHILDREN`` is the command's
+    alone. Linux keeps a process's ``ru_maxrss`` across ``exec``: a process started
+    straight from this one (which may hold hundreds of MiB of frames) would report at
+    least this one's size; started from the small wrapper, at least the wrapper's
+    (about 10 MiB).
+    """
+    t0 = time.perf_counter()
+    done = subprocess.run(
+        [sys.executable, "-c", _PEAK_PROBE, str(log), *cmd],
+        check=True,
+        capture_output=True,
+        text=True,
+    )
+    wall = time.perf_counter() - t0
+    return wall, float(done.stdout.strip().splitlines()[-1]) / 1024.0
+
+
 def run_cpp(build: Path, data: Path, out: Path) -> dict[str, Any] | None:
     """OpenRatSLAM on the data: its scale report, wall time, ATE and peak memory."""
     exe = build / "ratslam_driver"
     if not exe.exists():
         return None
     out.mkdir(parents=True, exist_ok=True)
-    # a fresh Python process runs the driver, so RUSAGE_CHILDREN is the driver's alone
-    probe = (
-        "import resource, subprocess, sys\n"
-        "with open(sys.argv[1], 'w') as log:\n"
-        "    subprocess.run(sys.argv[2:], check=True, stdout=log)\n"
-        "print(resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss)\n"
-    )
-    t0 = time.perf_counter()
-    done = subprocess.run(
-        [
-            sys.executable,
-            "-c",
-            probe,
-            str(out / "stdout.log"),
-            str(exe),
-            str(data / "config.txt"),
-            str(data),
-            str(out),
-        ],
-        check=True,
-        capture_output=True,
-        text=True,
-    )
-    wall = time.perf_counter() - t0
-    peak = float(done.stdout.strip().splitlines()[-1]) / 1024.0
+    cmd = [str(exe), str(data / "config.txt"), str(data), str(out)]
+    wall, peak = run_peak(cmd, out / "stdout.log")
     rep = read_openratslam_trace(out / "frames.csv")
     with (out / "frames.csv").open(newline="") as fh:
         ids = np.array([int(r["current_exp_id"]) for r in csv.DictReader(fh)])
@@ -161,10 +168,10 @@ def run_py(data: Path, sets: list[str], out: Path) -> dict[str, Any]:
     ]
     for s in sets:
         cmd += ["--set", s]
-    t0 = time.perf_counter()
-    subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL)
-    wall = time.perf_counter() - t0
+    out.mkdir(parents=True, exist_ok=True)
+    wall, peak = run_peak(cmd, out / "stdout.log")
     rep = json.loads((out / "scale.json").read_text())
+    rep["peak_memory_mb"] = peak  # the run's own getrusage can include its parent's size
     metrics = json.loads((out / "metrics.json").read_text())
     with (out / "trajectory.csv").open(newline="") as fh:
         ids = np.array([int(r["experience_id"]) for r in csv.DictReader(fh)])
@@ -182,18 +189,19 @@ def run_py(data: Path, sets: list[str], out: Path) -> dict[str, Any]:
 def main() -> None:
     quick = os.environ.get("BENCH_QUICK") == "1"
     frames = int(os.environ.get("BENCH_SCALE_FRAMES", 2000 if quick else 20000))
-    root = Path(os.environ.get("BENCH_OUT", "out/bench"))
+    root = Path(os.environ.get("BENCH_OUT", str(ROOT / "out" / "bench")))
     data = dataset(frames, root)
     print(f"suburb tour, {frames} frames (dataset {data})\n")
     results: dict[str, dict[str, Any]] = {}
-    build = os.environ.get("OPENRATSLAM_BUILD")
-    if build:
-        cpp = run_cpp(Path(build), data, root / f"scale-cpp-{frames}")
+    build = find_build()
+    if build is not None:
+        cpp = run_cpp(build, data, root / f"scale-cpp-{frames}")
         if cpp:
             results["OpenRatSLAM C++"] = cpp
     else:
         print(
-            "OpenRatSLAM's build not found: set OPENRATSLAM_BUILD to the directory built by "
+            "OpenRatSLAM's build not found (nor build/openratslam): set OPENRATSLAM_BUILD "
+            "to the directory built by "
             f"{SHARED_TOOLS / 'build.sh'} SOURCE BUILD_DIR (see its README) to compare.\n"
         )
     for i, (label, sets) in enumerate(profiles()):

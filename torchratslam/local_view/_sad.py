@@ -1,16 +1,18 @@
-"""The template search's last stage compiled with numba (imported lazily).
+"""The template search compiled with numba (imported lazily): one call per view.
 
-:func:`screen_pairs` walks the (template, offset) pairs that survived the lower bounds,
-in increasing order of their bound, and sums each pair's absolute differences in
-float64 row by row, abandoning the pair as soon as the partial sum exceeds the current
-cut (successive elimination). It decides nothing: the pairs it keeps are evaluated again
-by :meth:`TemplateMatcher.pair_sad` (the exact kernel, in the bank's dtype), which picks
-the answer, so the result is the brute-force one. It only skips pairs whose float64 sum
-already exceeds the best float64 sum found plus ``margin``, the rounding allowance the
-search uses between its bounds and the exact errors.
+:func:`search_normal` (normal mode) and :func:`search_panoramic` (panoramic mode) run
+the whole bound cascade of one view on the CPU: cheap lower bounds of each (template,
+offset) pair's sum of absolute differences (SAD), then the float64 SAD itself, summed
+row by row and abandoned as soon as the partial sum exceeds the current cut
+(successive elimination, :func:`early_sad`). They decide nothing: the pairs they keep
+are evaluated again by the exact kernel (:meth:`TemplateMatcher.sparse_sad
+<torchratslam.local_view.matcher.TemplateMatcher.sparse_sad>`, in the bank's dtype),
+which picks the answer, so the result is the brute-force one. They only skip pairs
+whose bound or float64 sum already exceeds the best float64 sum found plus ``margin``,
+the rounding allowance the search uses between its bounds and the exact errors.
 
 Compiled functions are cached on disk by numba (``cache=True``); the first use in a
-fresh environment compiles them (about a second).
+fresh environment compiles them (a few seconds).
 """
 
 from __future__ import annotations
@@ -40,12 +42,13 @@ def early_sad(  # pragma: no cover - compiled
     ny, nx = view.shape[0], view.shape[1]
     s = 0.0
     for y in range(ny):
-        if panoramic:
-            for c in range(nx):
-                v = c - o
-                if v < 0:
-                    v += nx
-                s += abs(np.float64(data[t, y, c]) - np.float64(view[y, v]))
+        if panoramic:  # template columns o .., then .. o - 1 (two contiguous runs)
+            trow = data[t, y]
+            vrow = view[y]
+            for c in range(nx - o):
+                s += abs(np.float64(trow[o + c]) - np.float64(vrow[c]))
+            for c in range(o):
+                s += abs(np.float64(trow[c]) - np.float64(vrow[nx - o + c]))
         else:
             trow = data[t, y, o : o + width]  # indices from range(): no wraparound checks
             vrow = view[y, shift : shift + width]
@@ -54,66 +57,6 @@ def early_sad(  # pragma: no cover - compiled
         if s > cut:
             break
     return s
-
-
-@njit(cache=True, nogil=True)
-def screen_pairs(  # pragma: no cover - compiled
-    data: np.ndarray,
-    view: np.ndarray,
-    t: np.ndarray,
-    k: np.ndarray,
-    lb: np.ndarray,
-    offsets: np.ndarray,
-    panoramic: bool,
-    width: int,
-    shift: int,
-    best0: float,
-    cap: float,
-    margin: float,
-) -> tuple[np.ndarray, float, float]:
-    """Screen candidate pairs by their float64 SAD with early exit.
-
-    Args:
-        data: the bank's rows, ``(N, Y, X)``.
-        view: the view template, ``(Y, X)``.
-        t, k: template id and offset index of each pair, ``(P,)``, sorted by ``lb``.
-        lb: each pair's lower bound of its SAD, ``(P,)``, increasing.
-        offsets: the column offset of each offset index, ``(K,)``.
-        panoramic: template column ``c`` faces view column ``(c - o) mod X``; else
-            template columns ``o .. o + width - 1`` face view columns ``shift ..``.
-        width: compared columns (normal mode).
-        shift: first compared view column (normal mode).
-        best0: the best SAD already known (e.g. of the seeds; ``inf`` if none).
-        cap: the threshold in SAD units (``inf``: none).
-        margin: rounding allowance added to every cut.
-
-    Returns:
-        ``(sad, best, pruned)``: ``sad`` ``(P,)`` the float64 SAD of each pair screened
-        to the end (``inf`` for pairs abandoned or never reached), the least such SAD,
-        and the least lower bound of the pairs abandoned or never reached (each partial
-        sum less ``margin``, or the bound ``lb``).
-    """
-    n = t.shape[0]
-    sad = np.full(n, np.inf)
-    best = best0
-    pruned = np.inf
-    for i in range(n):
-        cut = min(best, cap) + margin
-        if lb[i] > cut:
-            if lb[i] < pruned:
-                pruned = lb[i]
-            break
-        ti = t[i]
-        o = offsets[k[i]]
-        s = early_sad(data, ti, view, o, panoramic, width, shift, cut)
-        if s > cut:
-            if s - margin < pruned:
-                pruned = s - margin
-            continue
-        sad[i] = s
-        if s < best:
-            best = s
-    return sad, best, pruned
 
 
 # bound sums may be reassociated (vectorised): the search's margin covers their rounding
@@ -127,8 +70,6 @@ def search_normal(  # pragma: no cover - compiled
     pairs: np.ndarray,
     n: int,
     view: np.ndarray,
-    vcols: np.ndarray,
-    vpairs: np.ndarray,
     offsets: np.ndarray,
     width: int,
     shift: int,
@@ -139,16 +80,15 @@ def search_normal(  # pragma: no cover - compiled
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, int, float, float]:
     """Normal mode: every (template, offset) pair through three stages of elimination.
 
-    Per pair, the L1 distance between the sums of pairs of compared columns (the view's
-    ``vpairs`` against the template's, read from ``pairs``: 47 numbers per template of 48
-    columns serve every offset), then
-    between the compared columns' sums (``vcols`` against ``cols[t, o:o + width]``):
+    Per pair, the L1 distance between the sums of pairs of compared columns (the
+    view's, summed in float64, against the template's, read from ``pairs``: 47 numbers
+    per template of 48 columns serve every offset), then between the compared columns'
+    sums (the view's against ``cols[t, o:o + width]``):
     lower bounds of the pair's SAD by the triangle inequality, each tighter than the
     last; then, if both are within the cut, the float64 SAD itself, row by row with
     early exit. The hint template goes first (its error
-    sets a tight cut early), then every template in id order. As
-    :func:`screen_pairs`, it only screens: the pairs it returns are evaluated again
-    exactly by the caller.
+    sets a tight cut early), then every template in id order. It only screens: the
+    pairs it returns are evaluated again exactly by the caller.
 
     Args:
         data: the bank's rows, ``(capacity, Y, X)``.
@@ -158,9 +98,6 @@ def search_normal(  # pragma: no cover - compiled
             ``o``'s window is entry ``(o % 2) * (X // 2) + o // 2 + j``.
         n: templates in the bank.
         view: the view template, ``(Y, X)``.
-        vcols: the column sums of the view's compared columns ``shift .. shift +
-            width - 1``, ``(width,)``.
-        vpairs: ``vcols`` summed in pairs ``[v0 + v1, v2 + v3, ...]``, ``(width // 2,)``.
         offsets: the column offset of each offset index, ``(K,)``.
         width: compared columns.
         shift: first compared view column.
@@ -176,8 +113,16 @@ def search_normal(  # pragma: no cover - compiled
         lower bound of every pair abandoned (bound, or partial sum less ``margin``).
     """
     kk = offsets.shape[0]
-    nb = vpairs.shape[0]
+    nb = width // 2
     half = pairs.shape[1] // 2
+    # the column sums of the view's compared columns, and their sums in pairs
+    vcols = np.zeros(width)
+    for y in range(view.shape[0]):
+        for c in range(width):
+            vcols[c] += view[y, shift + c]
+    vpairs = np.empty(nb)
+    for j in range(nb):
+        vpairs[j] = vcols[2 * j] + vcols[2 * j + 1]
     out_t = np.empty(n * kk, np.int64)
     out_k = np.empty(n * kk, np.int64)
     out_s = np.empty(n * kk, np.float64)
@@ -196,7 +141,7 @@ def search_normal(  # pragma: no cover - compiled
         for ki in range(kk):
             cut = min(best, cap) + margin
             o = offsets[ki]
-            b = vcols[0] * 0
+            b = 0.0
             base = (o % 2) * half + o // 2
             row = pairs[t, base : base + nb]  # indices from range(): no wraparound checks
             for j in range(nb):
@@ -205,7 +150,7 @@ def search_normal(  # pragma: no cover - compiled
                 if b < pruned:
                     pruned = b
                 continue
-            b = cols[t, 0] * 0
+            b = 0.0
             win = cols[t, o : o + width]
             for c in range(width):
                 b += abs(win[c] - vcols[c])
@@ -214,6 +159,140 @@ def search_normal(  # pragma: no cover - compiled
                     pruned = b
                 continue
             s = early_sad(data, t, view, o, False, width, shift, cut)
+            if s > cut:
+                if s - margin < pruned:
+                    pruned = s - margin
+                continue
+            out_t[m] = t
+            out_k[m] = ki
+            out_s[m] = s
+            m += 1
+            if s < best:
+                best = s
+    return out_t, out_k, out_s, m, best, pruned
+
+
+@njit(cache=True, nogil=True, fastmath=_BOUND_MATH)
+def search_panoramic(  # pragma: no cover - compiled
+    data: np.ndarray,
+    gsort: np.ndarray,
+    pool: np.ndarray,
+    n: int,
+    view: np.ndarray,
+    group_of_row: np.ndarray,
+    block_of_col: np.ndarray,
+    offsets: np.ndarray,
+    hint: int,
+    cap: float,
+    margin: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, int, float, float]:
+    """Panoramic mode: the whole bound cascade of one view in one call.
+
+    The view's group column sums (float64) give its sorted profile and its block sums
+    at every offset (:func:`~torchratslam.local_view.bounds.view_summaries`' ``gsort``
+    and ``pool``); every template's bound at any offset (the L1 distance of the sorted
+    profiles) orders the templates. The template of the least bound goes first, then
+    the hint, then the others in increasing order of their bound, until that bound
+    exceeds the cut; per (template, offset) pair the block-pooled bound, then the
+    float64 SAD row by row with early exit. As :func:`search_normal`, it only screens:
+    the pairs it returns are evaluated again exactly by the caller.
+
+    Args:
+        data: the bank's rows, ``(capacity, Y, X)``.
+        gsort: each template's sorted group column sums, ``(capacity, G * X)``.
+        pool: each template's group-block sums, ``(capacity, G * B)``.
+        n: templates in the bank.
+        view: the view template, ``(Y, X)``.
+        group_of_row: the row group of each row, ``(Y,)``.
+        block_of_col: the column block of each template column, ``(X,)``.
+        offsets: the column offset of each offset index, ``(K,)``.
+        hint: a template id to try after the first (-1: none).
+        cap: the threshold in SAD units (``inf``: none).
+        margin: rounding allowance added to every cut.
+
+    Returns:
+        ``(t, k, sad, m, best, pruned)`` as :func:`search_normal`.
+    """
+    ny, nx = view.shape[0], view.shape[1]
+    g = gsort.shape[1] // nx
+    gb = pool.shape[1]
+    nb = gb // g
+    kk = offsets.shape[0]
+    # the view's group column sums, sorted profile and block sums at every offset
+    vg = np.zeros((g, nx))
+    for y in range(ny):
+        gi = group_of_row[y]
+        for c in range(nx):
+            vg[gi, c] += view[y, c]
+    vsort = np.empty(g * nx)
+    for gi in range(g):
+        vsort[gi * nx : (gi + 1) * nx] = np.sort(vg[gi])
+    # block j (template columns a[j] .. a[j + 1] - 1) faces view columns a[j] - o ..
+    # (mod X): differences of the circular prefix sums of the view's group columns
+    a = np.zeros(nb + 1, np.int64)
+    for c in range(nx - 1, -1, -1):
+        a[block_of_col[c]] = c
+    a[nb] = nx
+    cum = np.zeros((g, 2 * nx + 1))
+    for gi in range(g):
+        for c in range(2 * nx):
+            cum[gi, c + 1] = cum[gi, c] + vg[gi, c % nx]
+    vpool = np.empty((kk, gb))
+    for ki in range(kk):
+        o = offsets[ki]
+        for j in range(nb):
+            s0 = a[j] - o + nx  # the doubled prefix sums cover the wrap
+            s1 = s0 + a[j + 1] - a[j]
+            for gi in range(g):
+                vpool[ki, gi * nb + j] = cum[gi, s1] - cum[gi, s0]
+    # every template's bound at any offset
+    tb = np.empty(n)
+    for t in range(n):
+        b = 0.0
+        row = gsort[t]
+        for i in range(g * nx):
+            b += abs(row[i] - vsort[i])
+        tb[t] = b
+    order = np.argsort(tb, kind="mergesort")
+    out_t = np.empty(n * kk, np.int64)
+    out_k = np.empty(n * kk, np.int64)
+    out_s = np.empty(n * kk, np.float64)
+    m = 0
+    best = np.inf
+    pruned = np.inf
+    seed = order[0] if n > 0 else -1
+    if hint == seed or hint >= n:
+        hint = -1
+    for j in range(n + 2):
+        if j == 0:
+            t = seed
+        elif j == 1:
+            t = hint
+        else:
+            t = order[j - 2]
+            if t == seed or t == hint:
+                continue
+        if t < 0:
+            continue
+        if j >= 2 and tb[t] > min(best, cap) + margin:
+            if tb[t] < pruned:
+                pruned = tb[t]
+            break  # every later template's bound is at least as large
+        for ki in range(kk):
+            cut = min(best, cap) + margin
+            if tb[t] > cut:
+                if tb[t] < pruned:
+                    pruned = tb[t]
+                break
+            b = 0.0
+            prow = pool[t]
+            for i in range(gb):
+                b += abs(prow[i] - vpool[ki, i])
+            if b > cut:
+                if b < pruned:
+                    pruned = b
+                continue
+            s = early_sad(data, t, view, offsets[ki], True, nx, 0, cut)
             if s > cut:
                 if s - margin < pruned:
                     pruned = s - margin

@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Mapping
 
+import numpy as np
 import torch
 from torch import nn
 
@@ -62,6 +63,7 @@ class TemplateBank(nn.Module):
         self.dtype, self.device = dtype, torch.device(device) if device is not None else None
         self._n = 0
         self._capacity = 0
+        self._arrays: dict[str, tuple[torch.Tensor, np.ndarray]] = {}
         self._alloc(max(1, int(capacity)))
 
     def _shapes(self) -> dict[str, tuple[int, ...]]:
@@ -124,6 +126,26 @@ class TemplateBank(nn.Module):
             raise KeyError(f"the bank keeps no summary {name!r} ({sorted(self._summary_shapes)})")
         return self._buffer(name)[: self._n]
 
+    @property
+    def on_cpu(self) -> bool:
+        """Whether the rows live in CPU memory (then :meth:`array` works)."""
+        return self._buffer("data").device.type == "cpu"
+
+    def array(self, name: str) -> np.ndarray:
+        """A numpy view of the rows (``"data"``), the means or a summary over the whole
+        capacity (rows from ``len(self)`` on are zeros); CPU only. Made once per buffer
+        (again after the bank grows): what a compiled search reads every frame.
+
+        Shape:
+            ``(capacity, *shape)``.
+        """
+        buf = self._buffer(name)
+        cached = self._arrays.get(name)
+        if cached is None or cached[0] is not buf:
+            cached = (buf, buf.numpy())
+            self._arrays[name] = cached
+        return cached[1]
+
     def _buffer(self, name: str) -> torch.Tensor:
         buf = self._buffers["_" + name]
         assert buf is not None  # allocated by _alloc for every name of _shapes()
@@ -134,21 +156,35 @@ class TemplateBank(nn.Module):
         floats = sum(math.prod(shape) for shape in self._shapes().values())
         return floats * (torch.finfo(self.dtype).bits // 8) + 8
 
-    def append(self, templates: torch.Tensor, frames: torch.Tensor | int | None = None) -> range:
+    def append(
+        self,
+        templates: torch.Tensor,
+        frames: torch.Tensor | int | None = None,
+        *,
+        checked: bool = False,
+    ) -> range:
         """Append templates; returns their ids.
 
         Args:
             templates: the templates.
             frames: creation frame of each (or one for all); -1 if None.
+            checked: the caller vouches that ``templates`` are finite, of the bank's
+                shape, dtype and device (a local view's own templates): the checks are
+                skipped.
 
         Shape:
             templates: ``(K, Y, X)`` or ``(Y, X)``.
         """
-        t = torch.as_tensor(templates, dtype=self.dtype, device=self.device)
+        t = (
+            templates
+            if checked
+            else torch.as_tensor(templates, dtype=self.dtype, device=self.device)
+        )
         if t.ndim == 2:
             t = t[None]
-        check_shape(t, ("K", self.y_size, self.x_size), "templates")
-        check_finite(t, "templates")
+        if not checked:
+            check_shape(t, ("K", self.y_size, self.x_size), "templates")
+            check_finite(t, "templates")
         k = t.shape[0]
         if self._n + k > self._capacity:
             cap = self._capacity
@@ -156,13 +192,15 @@ class TemplateBank(nn.Module):
                 cap *= 2
             self._alloc(cap)
         sl = slice(self._n, self._n + k)
-        self._data[sl] = t
-        self._means[sl] = t.mean(dim=(1, 2))
+        self._buffer("data")[sl] = t
+        self._buffer("means")[sl] = t.mean(dim=(1, 2))
         if self._summarise is not None:
             for name, value in self._summarise(t).items():
                 self._buffer(name)[sl] = value
         if frames is None:
             frames = -1
-        self._frames[sl] = torch.as_tensor(frames, dtype=torch.int64, device=self.device)
+        if not isinstance(frames, int):
+            frames = torch.as_tensor(frames, dtype=torch.int64, device=self.device)
+        self._buffer("frames")[sl] = frames
         self._n += k
         return range(self._n - k, self._n)

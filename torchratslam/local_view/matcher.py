@@ -34,8 +34,14 @@ import torch
 from torchratslam.errors import ConfigError
 from torchratslam.local_view import bounds
 from torchratslam.local_view.bank import TemplateBank
-from torchratslam.local_view.exact import rolled_sad, window_sad
-from torchratslam.local_view.search import SearchState, cascade, compiled_windows, exhaustive
+from torchratslam.local_view.exact import few_rolled_sad, few_window_sad, rolled_sad, window_sad
+from torchratslam.local_view.search import (
+    SearchState,
+    cascade,
+    compiled_panoramic,
+    compiled_windows,
+    exhaustive,
+)
 
 __all__ = ["TemplateMatcher"]
 
@@ -94,15 +100,15 @@ class TemplateMatcher:
         self.offsets = offs.to(device)
         self.offsets_np = offs.numpy().astype(np.int64)
         self.n_offsets = int(offs.numel())
-        # the last stage by compiled early-exit sums on the CPU (False: torch chunks)
+        # one compiled call per search on the CPU (False: the torch cascade)
         self.compiled = True
         self.npix = y_size * self.width
         # panoramic: the view rolled so that its column c - o faces template column c
         cols = torch.arange(x_size)
         roll = (cols[None, :] - offs[:, None]) % x_size  # (K, X): view column facing c
-        self.roll_flat = (
-            (torch.arange(y_size)[None, :, None] * x_size + roll[:, None, :]).reshape(-1).to(device)
-        )
+        flat = (torch.arange(y_size)[None, :, None] * x_size + roll[:, None, :]).reshape(-1)
+        self.roll_flat = flat.to(device)
+        self.roll_rows_np = flat.numpy().reshape(self.n_offsets, -1)  # (K, Y * X)
         self.blocks = min(bounds.BLOCKS, self.width)
         blocks = bounds.column_blocks(self.width, self.blocks)
         # the compiled search's pair bound: sums of adjacent column pairs starting at even
@@ -117,6 +123,10 @@ class TemplateMatcher:
             ),
         }
         self._mat_cache: dict[tuple[str, torch.dtype], torch.Tensor] = {}
+        # the compiled panoramic search's pooling: the group of each row, the block of
+        # each template column
+        self.group_of_row = self._mats["groups"].argmax(0).cpu().numpy().astype(np.int64)
+        self.block_of_col = blocks.argmax(1).numpy().astype(np.int64)
 
     def make_bank(self, *, dtype: torch.dtype, device: torch.device | str | None) -> TemplateBank:
         """An empty bank with the summaries this matcher's bounds need."""
@@ -192,6 +202,32 @@ class TemplateMatcher:
             return rolled_sad(bank.data, parts["rolled"], t, k)
         return window_sad(bank.data, parts["block"], t, k, self.offsets)
 
+    def sparse_sad(
+        self, bank: TemplateBank, view: torch.Tensor, t: np.ndarray, k: np.ndarray
+    ) -> torch.Tensor:
+        """:meth:`pair_sad` of the pairs a compiled search keeps, on the CPU, from the
+        view alone: the same bits (:func:`~.exact.few_rolled_sad`,
+        :func:`~.exact.few_window_sad`; more pairs than one chunk holds, e.g. exact
+        ties, go through :func:`~.exact.rolled_sad` and :func:`~.exact.window_sad`
+        with only the view rows they need).
+
+        Shape:
+            view: ``(Y, X)``; t, k: ``(P,)`` int64 -> ``(P,)``.
+        """
+        v = view.numpy()
+        if t.size <= max(1, bounds.CHUNK_ELEMENTS // (self.y_size * self.x_size)):
+            data = bank.array("data")
+            if self.panoramic:
+                return few_rolled_sad(data, v, self.roll_rows_np, t, k)
+            return few_window_sad(data, v, t, self.offsets_np[k], self.shift, self.width)
+        tt, kt = torch.from_numpy(t), torch.from_numpy(k)
+        if self.panoramic:
+            ku, inv = np.unique(k, return_inverse=True)
+            rolled = torch.from_numpy(v.reshape(-1)[self.roll_rows_np[ku]])  # (U, Y * X)
+            return rolled_sad(bank.data, rolled, tt, torch.from_numpy(inv.reshape(-1)))
+        block = view[:, self.shift : self.shift + self.width].contiguous()
+        return window_sad(bank.data, block, tt, kt, self.offsets)
+
     def errors(
         self, bank: TemplateBank, view: torch.Tensor, ids: torch.Tensor | None = None
     ) -> torch.Tensor:
@@ -251,8 +287,9 @@ class TemplateMatcher:
         """The exact best (template id, offset, mean error); ``(-1, 0, inf)`` if empty.
 
         Dispatches to a strategy of :mod:`~torchratslam.local_view.search`: every pair
-        (``prune=False``), the compiled window search (normal mode on the CPU), or the
-        bound cascade.
+        (``prune=False``), one compiled call on the CPU (the window search in normal
+        mode, the panoramic cascade), or the torch bound cascade (other devices, or
+        :attr:`compiled` off).
 
         Args:
             bank: the templates.
@@ -272,9 +309,10 @@ class TemplateMatcher:
         if not prune:
             return exhaustive(self, bank, view, threshold)
         state = SearchState(self, bank, view, threshold)
-        on_cpu = bank.data.device.type == "cpu"
-        if not self.panoramic and self.compiled and on_cpu:
-            compiled_windows(state, hint)
+        if not self.compiled or not bank.on_cpu:
+            cascade(state, hint)
+        elif self.panoramic:
+            compiled_panoramic(state, hint)
         else:
-            cascade(state, hint, compiled=self.compiled and on_cpu)
+            compiled_windows(state, hint)
         return state.result()

@@ -9,6 +9,7 @@ optional global normalisation (``vt_normalisation``) and optional patch normalis
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import numpy as np
@@ -18,7 +19,7 @@ import torch.nn.functional as F
 from torchratslam.config import LocalViewParams
 from torchratslam.errors import InputError
 
-__all__ = ["as_tensor", "check_finite", "patch_normalise", "preprocess"]
+__all__ = ["as_tensor", "block_means_uint8", "check_finite", "patch_normalise", "preprocess"]
 
 
 def as_tensor(array: Any, what: str) -> torch.Tensor:
@@ -69,6 +70,67 @@ def _crop_bounds(size: int, lo: int, hi: int, axis: str) -> tuple[int, int]:
     return lo, end
 
 
+_NUMPY = {torch.float32: np.float32, torch.float64: np.float64}
+
+
+def _on_cpu(device: torch.device | str | None) -> bool:
+    return device is None or torch.device(device).type == "cpu"
+
+
+def _channels(shape: tuple[int, ...]) -> int:
+    """The image's channels (1 or 3); raises on other shapes and empty images."""
+    if len(shape) == 3 and shape[-1] in (1, 3):
+        channels = shape[-1]
+    elif len(shape) == 2:
+        channels = 1
+    else:
+        raise InputError(f"image: expected (H, W) grey or (H, W, 3) colour, got shape {shape}")
+    if math.prod(shape) == 0:
+        raise InputError(f"image: empty image of shape {shape}")
+    return channels
+
+
+def _blocks(img: Any, params: LocalViewParams) -> tuple[int, int, int, int, int, int]:
+    """``(y0, x0, ty, by, tx, bx)``: the crop's corner, the template size and the
+    averaged block's size."""
+    h, w = img.shape[0], img.shape[1]
+    y0, y1 = _crop_bounds(h, params.image_crop_y_min, params.image_crop_y_max, "y")
+    x0, x1 = _crop_bounds(w, params.image_crop_x_min, params.image_crop_x_max, "x")
+    ty, tx = params.template_y_size, params.template_x_size
+    by, bx = (y1 - y0) // ty, (x1 - x0) // tx
+    if by == 0 or bx == 0:
+        raise InputError(
+            f"template {tx}x{ty} is larger than the {x1 - x0}x{y1 - y0} crop of the "
+            f"{w}x{h} image; lower template_x_size/template_y_size or widen the crop"
+        )
+    return y0, x0, ty, by, tx, bx
+
+
+def block_means_uint8(
+    img: np.ndarray, y0: int, x0: int, ty: int, by: int, tx: int, bx: int
+) -> np.ndarray:
+    """:func:`preprocess`'s crop, grey and block averaging of a uint8 image, in numpy.
+
+    The pixel sums are integers (exact in any order), then one division: the float64
+    block means :func:`preprocess` computes in torch, bit for bit, without torch's
+    per-call cost.
+
+    Args:
+        img: the uint8 image.
+        y0, x0: the crop's first row and column.
+        ty, tx: template rows and columns.
+        by, bx: rows and columns of each averaged block.
+
+    Shape:
+        img: ``(H, W)`` or ``(H, W, C)`` -> ``(ty, tx)`` float64.
+    """
+    crop = img[y0 : y0 + ty * by, x0 : x0 + tx * bx]
+    channels = crop.shape[2] if crop.ndim == 3 else 1
+    rows = crop.reshape(ty, by, -1).sum(axis=1, dtype=np.int64)  # (ty, tx * bx * C)
+    sums = rows.reshape(ty, tx, -1).sum(axis=2)
+    return sums / (255.0 * channels * by * bx)
+
+
 def preprocess(
     image: Any,
     params: LocalViewParams,
@@ -106,40 +168,29 @@ def preprocess(
         InputError: empty image, wrong shape or channels, NaN values, a crop outside the
             image, or a template larger than the crop.
     """
-    img = as_tensor(image, "image")
-    if img.ndim == 3 and img.shape[-1] in (1, 3):
-        channels = img.shape[-1]
-    elif img.ndim == 2:
-        channels = 1
+    if isinstance(image, np.ndarray) and image.dtype == np.uint8 and _on_cpu(device):
+        _channels(image.shape)  # the checks
+        means = block_means_uint8(image, *_blocks(image, params))
+        if params.vt_normalisation <= 0 and params.vt_patch_normalise <= 0 and dtype in _NUMPY:
+            return torch.from_numpy(means.astype(_NUMPY[dtype]))  # rounded as torch rounds
+        v = torch.from_numpy(means)
     else:
-        raise InputError(
-            f"image: expected (H, W) grey or (H, W, 3) colour, got shape {tuple(img.shape)}"
-        )
-    if img.numel() == 0:
-        raise InputError(f"image: empty image of shape {tuple(img.shape)}")
-    is_uint8 = img.dtype == torch.uint8
-    if not is_uint8 and not img.is_floating_point():
-        raise InputError(
-            f"image: dtype {img.dtype} is not supported; pass uint8 or float in [0, 1]"
-        )
-    check_finite(img, "image")
-    h, w = img.shape[0], img.shape[1]
-    y0, y1 = _crop_bounds(h, params.image_crop_y_min, params.image_crop_y_max, "y")
-    x0, x1 = _crop_bounds(w, params.image_crop_x_min, params.image_crop_x_max, "x")
-    ty, tx = params.template_y_size, params.template_x_size
-    by, bx = (y1 - y0) // ty, (x1 - x0) // tx
-    if by == 0 or bx == 0:
-        raise InputError(
-            f"template {tx}x{ty} is larger than the {x1 - x0}x{y1 - y0} crop of the "
-            f"{w}x{h} image; lower template_x_size/template_y_size or widen the crop"
-        )
-    crop = img[y0 : y0 + ty * by, x0 : x0 + tx * bx].to(device=device, dtype=torch.float64)
-    if channels > 1:
-        crop = crop.sum(-1)
-    elif crop.ndim == 3:
-        crop = crop[..., 0]
-    v = crop.reshape(ty, by, tx, bx).sum(dim=(1, 3))
-    v = v / ((255.0 if is_uint8 else 1.0) * channels * by * bx)
+        img = as_tensor(image, "image")
+        channels = _channels(tuple(img.shape))
+        is_uint8 = img.dtype == torch.uint8
+        if not is_uint8 and not img.is_floating_point():
+            raise InputError(
+                f"image: dtype {img.dtype} is not supported; pass uint8 or float in [0, 1]"
+            )
+        check_finite(img, "image")
+        y0, x0, ty, by, tx, bx = _blocks(img, params)
+        crop = img[y0 : y0 + ty * by, x0 : x0 + tx * bx].to(device=device, dtype=torch.float64)
+        if channels > 1:
+            crop = crop.sum(-1)
+        elif crop.ndim == 3:
+            crop = crop[..., 0]
+        v = crop.reshape(ty, by, tx, bx).sum(dim=(1, 3))
+        v = v / ((255.0 if is_uint8 else 1.0) * channels * by * bx)
     if params.vt_normalisation > 0:
         mean = v.mean()
         if float(mean) > 0:

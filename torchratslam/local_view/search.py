@@ -9,11 +9,23 @@ rounding margin, and the answer is always picked by the exact torch kernel
 * :func:`exhaustive`: every pair (``prune=False``).
 * :func:`compiled_windows`: normal mode on the CPU; every pair through the compiled
   column-sum bounds and early-exit sums of :mod:`~torchratslam.local_view._sad`.
-* :func:`cascade`: seeds (the best-bounded template and the hint), then the template
-  bound (panoramic) and the coarse per-pair bound, then the surviving pairs in
-  increasing order of their bound, screened by the compiled early-exit sums on the CPU
-  (:func:`screen_compiled`) or evaluated in geometrically growing chunks
-  (:func:`screen_chunks`) until the next bound exceeds the best.
+* :func:`compiled_panoramic`: panoramic mode on the CPU; the view's summaries, the
+  template bound, the coarse per-pair bound and the early-exit sums in one compiled
+  call.
+* :func:`cascade`: in torch (any device, batched): seeds (the best-bounded template
+  and the hint), then the template bound (panoramic) and the coarse per-pair bound,
+  then the surviving pairs in increasing order of their bound, evaluated in
+  geometrically growing chunks (:func:`screen_chunks`) until the next bound exceeds
+  the best.
+
+The compiled strategies screen in float64 and return the pairs within the rounding
+margin of the best; those few are evaluated by the exact kernel
+(:meth:`TemplateMatcher.sparse_sad
+<torchratslam.local_view.matcher.TemplateMatcher.sparse_sad>`), which picks the answer.
+
+One strategy answers a different question: :func:`newest_first` (xRatSLAM's RecodedLV)
+returns the *newest* template whose best error is at most the threshold, not the best
+template; it searches from the newest template backwards and stops at the first match.
 
 :class:`SearchState` carries the incumbent and the least bound of everything skipped
 through these steps and turns them into the answer.
@@ -36,10 +48,11 @@ if TYPE_CHECKING:
 __all__ = [
     "SearchState",
     "cascade",
+    "compiled_panoramic",
     "compiled_windows",
     "exhaustive",
+    "newest_first",
     "screen_chunks",
-    "screen_compiled",
 ]
 
 
@@ -86,12 +99,20 @@ class SearchState:
     ) -> None:
         self.matcher, self.bank, self.view = matcher, bank, view
         self.n, self.kk = len(bank), matcher.n_offsets
-        self.parts = matcher.view_parts(view)
+        self._parts: dict[str, torch.Tensor] | None = None
         # bounds and exact SADs are rounded differently: never prune within this margin
         self.margin = (1e-5 if view.dtype != torch.float64 else 1e-11) * matcher.npix
         self.cap = math.inf if threshold is None else threshold * matcher.npix
         self.best = (math.inf, self.n, self.kk)  # (SAD, template id, offset index)
         self.pruned = math.inf  # least bound of everything skipped
+
+    @property
+    def parts(self) -> dict[str, torch.Tensor]:
+        """The view's summaries (:meth:`TemplateMatcher.view_parts
+        <torchratslam.local_view.matcher.TemplateMatcher.view_parts>`), made on first use."""
+        if self._parts is None:
+            self._parts = self.matcher.view_parts(self.view)
+        return self._parts
 
     def cut(self) -> float:
         """SADs above this cannot change the answer."""
@@ -111,6 +132,30 @@ class SearchState:
             key = int(torch.where(sad == m, t * kk + k, torch.full_like(t, self.n * kk)).min())
             self.best = min(self.best, (float(m), key // kk, key % kk))
 
+    def evaluate_screened(
+        self, t: np.ndarray, k: np.ndarray, sad64: np.ndarray, best64: float, low: float
+    ) -> None:
+        """Take a compiled screen's output: the pairs whose float64 SAD is within the
+        margin of the best (or of the cap) are evaluated exactly (on the CPU, from the
+        view alone); ``low`` is the least bound of everything the screen skipped.
+
+        Shape:
+            t, k, sad64: ``(P,)``.
+        """
+        self.pruned = min(self.pruned, low)
+        sel = sad64 <= min(best64, self.cap) + self.margin
+        if sel.size == 1 and sel[0]:  # the usual single pair
+            one = float(self.matcher.sparse_sad(self.bank, self.view, t, k)[0])
+            self.best = min(self.best, (one, int(t[0]), int(k[0])))
+            return
+        t, k = t[sel], k[sel]
+        if t.size:
+            kk = self.kk
+            sad = self.matcher.sparse_sad(self.bank, self.view, t, k).numpy()
+            m = sad.min()
+            key = int(np.where(sad == m, t * kk + k, self.n * kk).min())
+            self.best = min(self.best, (float(m), key // kk, key % kk))
+
     def keep(self, bound: torch.Tensor) -> torch.Tensor:
         """Which bounds are within the cut; the others lower :attr:`pruned`.
 
@@ -128,7 +173,7 @@ class SearchState:
         npix = self.matcher.npix
         if self.best[0] > self.cap:
             return -1, 0, min(self.best[0], self.pruned) / npix
-        return self.best[1], int(self.matcher.offsets[self.best[2]]), self.best[0] / npix
+        return self.best[1], int(self.matcher.offsets_np[self.best[2]]), self.best[0] / npix
 
 
 def compiled_windows(state: SearchState, hint: int) -> None:
@@ -137,18 +182,13 @@ def compiled_windows(state: SearchState, hint: int) -> None:
     it keeps are evaluated exactly here, so the answer is the same."""
     from torchratslam.local_view._sad import search_normal
 
-    matcher, n = state.matcher, state.n
-    vcols = state.parts["block"].sum(0)
-    nb = matcher.pair_blocks
-    vpairs = vcols[0 : 2 * nb : 2] + vcols[1 : 2 * nb : 2]
+    matcher, bank, n = state.matcher, state.bank, state.n
     pt, pk, ps, m, best64, low = search_normal(
-        state.bank.data.numpy(),
-        state.bank.summary("cols").numpy(),
-        state.bank.summary("pairs").numpy(),
+        bank.array("data"),
+        bank.array("cols"),
+        bank.array("pairs"),
         n,
         np.ascontiguousarray(state.view.numpy()),
-        np.ascontiguousarray(vcols.numpy()),
-        np.ascontiguousarray(vpairs.numpy()),
         matcher.offsets_np,
         matcher.width,
         matcher.shift,
@@ -157,19 +197,37 @@ def compiled_windows(state: SearchState, hint: int) -> None:
         state.cap,
         state.margin,
     )
-    state.pruned = low
-    sel = ps[:m] <= min(best64, state.cap) + state.margin
-    state.evaluate(torch.from_numpy(pt[:m][sel]), torch.from_numpy(pk[:m][sel]))
+    state.evaluate_screened(pt[:m], pk[:m], ps[:m], best64, low)
 
 
-def cascade(state: SearchState, hint: int, *, compiled: bool) -> None:
+def compiled_panoramic(state: SearchState, hint: int) -> None:
+    """Panoramic mode on the CPU: the whole cascade in one compiled call
+    (:func:`~torchratslam.local_view._sad.search_panoramic`); the pairs it keeps are
+    evaluated exactly here, so the answer is the same."""
+    from torchratslam.local_view._sad import search_panoramic
+
+    matcher, bank, n = state.matcher, state.bank, state.n
+    pt, pk, ps, m, best64, low = search_panoramic(
+        bank.array("data"),
+        bank.array("gsort"),
+        bank.array("pool"),
+        n,
+        np.ascontiguousarray(state.view.numpy()),
+        matcher.group_of_row,
+        matcher.block_of_col,
+        matcher.offsets_np,
+        hint if 0 <= hint < n else -1,
+        state.cap,
+        state.margin,
+    )
+    state.evaluate_screened(pt[:m], pk[:m], ps[:m], best64, low)
+
+
+def cascade(state: SearchState, hint: int) -> None:
     """Seeds, then the bounds, then the surviving pairs in increasing order of their
-    bound (screened by :func:`screen_compiled` when ``compiled``, else
-    :func:`screen_chunks`)."""
+    bound (:func:`screen_chunks`), in torch."""
     t, k, lb = _candidates(state, _seed(state, hint))
-    if t.numel() and compiled:
-        screen_compiled(state, t, k, lb)
-    elif t.numel():
+    if t.numel():
         screen_chunks(state, t, k, lb)
 
 
@@ -224,36 +282,6 @@ def _candidates(
     return t, k, lb
 
 
-def screen_compiled(state: SearchState, t: torch.Tensor, k: torch.Tensor, lb: torch.Tensor) -> None:
-    """Screen the sorted pairs by the compiled early-exit sums
-    (:func:`~torchratslam.local_view._sad.screen_pairs`); the pairs it keeps are
-    evaluated exactly here, so the answer is the same.
-
-    Shape:
-        t, k, lb: ``(P,)``, sorted by ``lb``.
-    """
-    from torchratslam.local_view._sad import screen_pairs
-
-    matcher = state.matcher
-    sad64, best64, low = screen_pairs(
-        state.bank.data.numpy(),
-        np.ascontiguousarray(state.view.numpy()),
-        t.numpy(),
-        k.numpy(),
-        lb.double().numpy(),
-        matcher.offsets_np,
-        matcher.panoramic,
-        matcher.width,
-        matcher.shift,
-        state.best[0],
-        state.cap,
-        state.margin,
-    )
-    state.pruned = min(state.pruned, low)
-    keep64 = torch.from_numpy(sad64 <= min(best64, state.cap) + state.margin)
-    state.evaluate(t[keep64], k[keep64])
-
-
 def screen_chunks(state: SearchState, t: torch.Tensor, k: torch.Tensor, lb: torch.Tensor) -> None:
     """Evaluate the sorted pairs exactly in chunks that grow geometrically, stopping
     when the next bound exceeds the cut.
@@ -272,3 +300,58 @@ def screen_chunks(state: SearchState, t: torch.Tensor, k: torch.Tensor, lb: torc
         ok = state.keep(lb[s:e])
         state.evaluate(t[s:e][ok], k[s:e][ok])
         s, size = e, min(size * 2, per)
+
+
+def newest_first(
+    matcher: TemplateMatcher,
+    bank: TemplateBank,
+    view: torch.Tensor,
+    threshold: float,
+    *,
+    first: int = 16,
+) -> tuple[int, int, float]:
+    """xRatSLAM's RecodedLV search: the newest template whose best mean error is at most
+    ``threshold``, searching from the newest template backwards.
+
+    The templates are taken newest first in chunks that grow geometrically (``first``,
+    then doubling); in each chunk the pairs whose coarse lower bound is above the
+    threshold are skipped and the others evaluated exactly; the search stops at the
+    first chunk holding a match and returns its newest matching template, at that
+    template's best offset (ties: the lowest offset). What a loop from the newest
+    template down to template 0, stopping at the first whose error (minimum over the
+    offsets) is at most ``threshold``, returns.
+
+    Returns:
+        ``(template id, offset, mean error)``; ``(-1, 0, e)`` when no template matches,
+        ``e`` a lower bound (above ``threshold``) of the best mean error.
+
+    Shape:
+        view: ``(Y, X)``.
+    """
+    n, kk, npix = len(bank), matcher.n_offsets, matcher.npix
+    parts = matcher.view_parts(view)
+    margin = (1e-5 if view.dtype != torch.float64 else 1e-11) * npix
+    cut = threshold * npix + margin
+    per = max(first, CHUNK_ELEMENTS // (matcher.y_size * matcher.x_size * kk))
+    low = math.inf  # least mean error (or bound of a skipped pair) seen
+    hi, size = n, first
+    while hi > 0:
+        lo = max(0, hi - size)
+        ids = torch.arange(lo, hi, device=view.device)
+        bound = matcher.coarse_bound(bank, parts, ids)  # (M, K)
+        ok = bound <= cut
+        if not bool(ok.all()):
+            low = min(low, float(bound.masked_fill(ok, math.inf).min()) / npix)
+        pairs = ok.nonzero()
+        err = torch.full((hi - lo, kk), math.inf, dtype=view.dtype, device=view.device)
+        if pairs.numel():
+            sad = matcher.pair_sad(bank, parts, ids[pairs[:, 0]], pairs[:, 1])
+            err[pairs[:, 0], pairs[:, 1]] = sad / npix
+        per_t, k_best = err.min(1)  # the first minimum: the lowest offset
+        hit = (per_t <= threshold).nonzero()
+        if hit.numel():
+            j = int(hit[-1, 0])  # the newest match of the chunk
+            return lo + j, int(matcher.offsets[int(k_best[j])]), float(per_t[j])
+        low = min(low, float(per_t.min()))
+        hi, size = lo, min(size * 2, per)
+    return -1, 0, low

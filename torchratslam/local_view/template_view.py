@@ -197,19 +197,24 @@ class TemplateView(nn.Module):
         """
         frame = self.frame_counter if frame_index is None else int(frame_index)
         view = self._to_template(observation)
-        self.frame_counter += 1
+        self._set_ints(frame_counter=self.frame_counter + 1)
         threshold = None if self.exact_errors else self.params.vt_match_threshold
         if not self._trusted_templates:
             view = self._check_template(view)
         tid, offset, err = self._search(view, threshold)
-        self.previous_id = self.current_id
-        if tid >= 0 and err <= self.params.vt_match_threshold:
-            self.current_id = tid
+        matched = tid >= 0 and err <= self.params.vt_match_threshold
+        if not matched:
+            assert self.bank is not None  # _to_template set it up
+            tid = self.bank.append(view, frame, checked=True)[0]
+        self._set_ints(previous_id=self.current_id, current_id=tid)
+        if matched:
             return ViewMatch(tid, self.relative_rad(offset), err, offset, False)
-        assert self.bank is not None  # _to_template set it up
-        new = self.bank.append(view, frame)[0]
-        self.current_id = new
-        return ViewMatch(new, 0.0, err, 0, True)
+        return ViewMatch(tid, 0.0, err, 0, True)
+
+    def _set_ints(self, **values: int) -> None:
+        """Set plain int attributes past ``nn.Module.__setattr__``'s checks (which look
+        for parameters, buffers and modules; a per-frame cost)."""
+        vars(self).update(values)
 
     def forward(self, observation: Any, frame_index: int | None = None) -> ViewMatch:
         """``module(observation)`` is :meth:`process` (the ``nn.Module`` call)."""

@@ -45,6 +45,23 @@ def test_append_keeps_rows_metadata_and_summaries_in_step_while_doubling():
     assert bank.summary_shapes == {"cols": (5,), "peak": (1,)}
 
 
+def test_array_is_a_numpy_view_of_the_whole_capacity_that_follows_growth():
+    bank = _bank(capacity=2)
+    bank.append(torch.ones(2, 3, 5))
+    first = bank.array("data")
+    assert first.shape == (2, 3, 5) and bank.array("data") is first  # made once
+    bank.append(torch.full((1, 3, 5), 2.0))  # grows to 4 rows: a new view
+    data, cols = bank.array("data"), bank.array("cols")
+    assert data is not first and data.shape == (4, 3, 5) and bank.on_cpu
+    np.testing.assert_array_equal(data[:3], bank.data.numpy())
+    assert not data[3].any()  # rows past len(bank) are zeros
+    np.testing.assert_array_equal(cols[:3], bank.summary("cols").numpy())
+    bank.append(torch.zeros(1, 3, 5))  # no growth: the same view sees the new row
+    assert bank.array("data") is data and not data[3].any()
+    data[0, 0, 0] = 7.0  # a view, not a copy
+    assert float(bank.data[0, 0, 0]) == 7.0
+
+
 def test_frames_default_to_minus_one_and_batches_take_one_frame_each():
     bank = _bank(capacity=8)
     assert list(bank.append(torch.zeros(2, 3, 5))) == [0, 1]

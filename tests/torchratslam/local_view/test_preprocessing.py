@@ -88,6 +88,31 @@ def test_preprocess_input_forms_agree():
 
 
 @pytest.mark.parametrize(
+    "keys",
+    [
+        {"template_x_size": 7, "template_y_size": 3},
+        {"template_x_size": 10, "template_y_size": 4, "image_crop_x_min": 3,
+         "image_crop_x_max": 45, "image_crop_y_min": 2, "image_crop_y_max": 17},
+        {"template_x_size": 50, "template_y_size": 20},
+        {"template_x_size": 9, "template_y_size": 5, "vt_normalisation": 0.4},
+        {"template_x_size": 8, "template_y_size": 5, "vt_patch_normalise": 1},
+    ],
+)  # fmt: skip
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+def test_uint8_arrays_give_the_torch_path_bit_for_bit(keys, dtype):
+    """numpy uint8 images are block-averaged in numpy: the same bits as a uint8 tensor
+    (the torch path) gives, grey, one channel or colour."""
+    rng = np.random.default_rng(len(keys))
+    p = LocalViewParams(**keys)
+    for shape in ((20, 50), (20, 50, 1), (20, 50, 3), (23, 57, 3)):
+        for _ in range(20):
+            img = rng.integers(0, 256, shape).astype(np.uint8)
+            got = preprocess(img, p, dtype=dtype)
+            want = preprocess(torch.from_numpy(img), p, dtype=dtype)
+            assert got.dtype == dtype and torch.equal(got, want)
+
+
+@pytest.mark.parametrize(
     ("image", "keys", "pattern"),
     [
         (np.zeros((0, 10), np.uint8), {}, "empty"),
