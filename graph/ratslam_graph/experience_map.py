@@ -44,10 +44,10 @@ from typing import Any
 import networkx as nx
 import numpy as np
 
-from ratslam_graph import relaxation
+from ratslam_graph import queries, relaxation
 from ratslam_graph.errors import GraphError, MapFormatError
 from ratslam_graph.experience_graph import ExperienceGraph
-from ratslam_graph.features import average_transition
+from ratslam_graph.features import average_transition, peak_experience
 from ratslam_graph.geometry import inverse, wrap_angle
 from ratslam_graph.messages import Action, ActionKind
 from ratslam_graph.params import ExperienceMapParams
@@ -419,6 +419,41 @@ class ExperienceMap:
         )
         if self.params.exp_link_time == "per_link":
             self.accum_time = 0.0
+
+    def activity_action(
+        self,
+        pc: tuple[float, float, float] | np.ndarray,
+        template_id: int,
+        *,
+        dims: tuple[float, float] | None = None,
+        relative_rad: float = 0.0,
+    ) -> Action:
+        """The action of ``exp_create_rule="activity"`` (Eqs. 1-4 of the experience-map paper).
+
+        Every experience's activity comes from its pose-cell distance to the packet and
+        its view (:func:`ratslam_graph.features.experience_activity` with the zone
+        constants ``exp_activity_zone_*``); the most active is the peak experience. A
+        peak below ``exp_activity_threshold`` (or none) learns a new experience
+        (``CREATE``); a peak other than the current experience, and more active than it,
+        becomes current (``LINK``); otherwise nothing happens.
+
+        Args:
+            pc: pose-cell coordinates of the dominant packet (cells).
+            template_id: the current view template.
+            dims: ``(pc_dim_xy, pc_dim_th)``: distances the short way round the wrapping
+                network (None: plain differences).
+            relative_rad: the relative view angle the action carries.
+        """
+        a = queries.activity(self.view(), pc, template_id, dims=dims)
+        peak, level = peak_experience(a)
+        cur = self.current_id
+        if peak < 0 or level < self.params.exp_activity_threshold:
+            return Action(
+                ActionKind.CREATE, dest_id=len(self), src_id=cur, relative_rad=relative_rad
+            )
+        if cur >= 0 and a[cur] >= level:
+            return Action.none()
+        return Action(ActionKind.LINK, dest_id=peak, src_id=cur, relative_rad=relative_rad)
 
     # ------------------------------------------------------------ relaxation
     @property

@@ -85,10 +85,11 @@ def wrap_angle(a: Any, *, include_pi: bool = False) -> Any:
     if not isinstance(a, _NUMPY_LIKE):  # a tensor: keep its type, device and dtype
         return math.pi - (math.pi - a) % _TAU if include_pi else (a + math.pi) % _TAU - math.pi
     x = np.asarray(a, dtype=np.float64)
-    if include_pi:
-        out = np.pi - np.remainder(np.pi - x, TWO_PI)
-    else:
-        out = np.remainder(x + np.pi, TWO_PI) - np.pi
+    with np.errstate(invalid="ignore"):  # an infinite angle wraps to NaN, quietly
+        if include_pi:
+            out = np.pi - np.remainder(np.pi - x, TWO_PI)
+        else:
+            out = np.remainder(x + np.pi, TWO_PI) - np.pi
     return float(out) if out.ndim == 0 else out
 
 
@@ -112,10 +113,12 @@ def compose(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """
     a = np.asarray(a, dtype=np.float64)
     b = np.asarray(b, dtype=np.float64)
-    c, s = np.cos(a[..., 2]), np.sin(a[..., 2])
-    x = a[..., 0] + c * b[..., 0] - s * b[..., 1]
-    y = a[..., 1] + s * b[..., 0] + c * b[..., 1]
-    return np.stack([x, y, wrap_angle(a[..., 2] + b[..., 2])], axis=-1)
+    with np.errstate(invalid="ignore", over="ignore"):  # non-finite in, NaN/inf out
+        c, s = np.cos(a[..., 2]), np.sin(a[..., 2])
+        x = a[..., 0] + c * b[..., 0] - s * b[..., 1]
+        y = a[..., 1] + s * b[..., 0] + c * b[..., 1]
+        th = a[..., 2] + b[..., 2]
+    return np.stack([x, y, wrap_angle(th)], axis=-1)
 
 
 def inverse(p: np.ndarray, *, include_pi: bool = False) -> np.ndarray:
@@ -125,10 +128,11 @@ def inverse(p: np.ndarray, *, include_pi: bool = False) -> np.ndarray:
         p: (..., 3) ``[x, y, th]``. Returns (..., 3).
     """
     p = np.asarray(p, dtype=np.float64)
-    c, s = np.cos(p[..., 2]), np.sin(p[..., 2])
     out = np.empty(p.shape, dtype=np.float64)
-    out[..., 0] = -(c * p[..., 0] + s * p[..., 1])
-    out[..., 1] = -(-s * p[..., 0] + c * p[..., 1])
+    with np.errstate(invalid="ignore", over="ignore"):  # non-finite in, NaN/inf out
+        c, s = np.cos(p[..., 2]), np.sin(p[..., 2])
+        out[..., 0] = -(c * p[..., 0] + s * p[..., 1])
+        out[..., 1] = -(-s * p[..., 0] + c * p[..., 1])
     out[..., 2] = wrap_angle(-p[..., 2], include_pi=include_pi)
     return out
 
@@ -141,10 +145,13 @@ def between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """
     a = np.asarray(a, dtype=np.float64)
     b = np.asarray(b, dtype=np.float64)
-    c, s = np.cos(a[..., 2]), np.sin(a[..., 2])
-    dx = b[..., 0] - a[..., 0]
-    dy = b[..., 1] - a[..., 1]
-    return np.stack([c * dx + s * dy, -s * dx + c * dy, wrap_angle(b[..., 2] - a[..., 2])], axis=-1)
+    with np.errstate(invalid="ignore", over="ignore"):  # non-finite in, NaN/inf out
+        c, s = np.cos(a[..., 2]), np.sin(a[..., 2])
+        dx = b[..., 0] - a[..., 0]
+        dy = b[..., 1] - a[..., 1]
+        xy = [c * dx + s * dy, -s * dx + c * dy]
+        th = b[..., 2] - a[..., 2]
+    return np.stack([*xy, wrap_angle(th)], axis=-1)
 
 
 # --------------------------------------------------------------------------- alignment
@@ -213,7 +220,10 @@ def align_se2(
     if w.shape != (len(s),) or np.any(w < 0) or w.sum() <= 0:
         raise InputError("weights must be (N,) non-negative with a positive sum")
     w = w / w.sum()
-    ms, md = w @ s, w @ d
+    # weighted means as elementwise products and sums (no BLAS call: the same bits
+    # whichever BLAS kernel the CPU picks)
+    ms = np.array([np.sum(w * s[:, 0]), np.sum(w * s[:, 1])])
+    md = np.array([np.sum(w * d[:, 0]), np.sum(w * d[:, 1])])
     sc, dc = s - ms, d - md
     # cross-covariance terms: the optimal angle is atan2(sum w (s x d), sum w (s . d))
     dot = np.sum(w * (sc[:, 0] * dc[:, 0] + sc[:, 1] * dc[:, 1]))
@@ -369,6 +379,9 @@ def chain_poses(steps: np.ndarray, start: Sequence[float] = (0.0, 0.0, 0.0)) -> 
     Shape:
         steps: (N, 3) ``[dx, dy, dth]`` (step k moves pose k-1 to pose k; row 0 is
         ignored). Returns (N, 3).
+
+    Raises:
+        InputError: a step or the start that is not finite, or positions that overflow.
     """
     step = np.asarray(steps, dtype=np.float64).reshape(-1, 3)
     n = len(step)
@@ -376,11 +389,18 @@ def chain_poses(steps: np.ndarray, start: Sequence[float] = (0.0, 0.0, 0.0)) -> 
     if n == 0:
         return poses
     poses[0] = start
-    th = wrap_angle(np.cumsum(np.concatenate([[start[2]], step[1:, 2]])))
-    c, s = np.cos(th[:-1]), np.sin(th[:-1])
-    dx = c * step[1:, 0] - s * step[1:, 1]
-    dy = s * step[1:, 0] + c * step[1:, 1]
-    poses[:, 0] = start[0] + np.concatenate([[0.0], np.cumsum(dx)])
-    poses[:, 1] = start[1] + np.concatenate([[0.0], np.cumsum(dy)])
+    bad = ~np.isfinite(step[1:]).all(axis=1)
+    if bad.any() or not np.isfinite(poses[0]).all():
+        which = f"step {int(np.flatnonzero(bad)[0]) + 1}" if bad.any() else "the start"
+        raise InputError(f"cannot chain poses: {which} is not finite (NaN or inf)")
+    with np.errstate(invalid="ignore", over="ignore"):  # overflow is refused below
+        th = wrap_angle(np.cumsum(np.concatenate([[start[2]], step[1:, 2]])))
+        c, s = np.cos(th[:-1]), np.sin(th[:-1])
+        dx = c * step[1:, 0] - s * step[1:, 1]
+        dy = s * step[1:, 0] + c * step[1:, 1]
+        poses[:, 0] = start[0] + np.concatenate([[0.0], np.cumsum(dx)])
+        poses[:, 1] = start[1] + np.concatenate([[0.0], np.cumsum(dy)])
     poses[:, 2] = th
+    if not np.isfinite(poses).all():
+        raise InputError("cannot chain poses: the positions overflow (steps too large)")
     return poses

@@ -151,6 +151,20 @@ class ExperienceMapParams(Params):
         "theta_a of Eq. 2: pose-cell theta' zone constant of experience activity (cells)",
         gt=0.0,
     )
+    exp_create_rule: str = param(
+        "pc_distance",
+        "when a new experience is learnt: pc_distance (the pose cells' action, OpenRatSLAM: "
+        "no experience of the current view within exp_delta_pc_threshold cells) | activity "
+        "(the peak experience's activity, Eqs. 1-4, below exp_activity_threshold)",
+        choices=("pc_distance", "activity"),
+    )
+    exp_activity_threshold: float = param(
+        1.0,
+        "exp_create_rule=activity: a new experience is learnt when the peak experience's "
+        "activity (Eq. 3, in [0, 2]) is below this",
+        gt=0.0,
+        le=2.0,
+    )
     exp_link_averaging: bool = param(
         False, "average repeated transitions into the existing link (Eq. 6); off in OpenRatSLAM"
     )

@@ -213,18 +213,41 @@ class RatSLAM:
         odo: tuple[float, float, float],
         action: Action,
         pc: tuple[float, float, float],
+        behaviour: int | None = None,
     ) -> int:
         em = self.experience_map
-        relax = getattr(getattr(em, "params", None), "exp_relax", "every_frame")
+        params = getattr(em, "params", None)
+        relax = getattr(params, "exp_relax", "every_frame")
+        extra = {} if behaviour is None else {"behaviour": int(behaviour)}
         with self.timings.section("experience_map"):
             if not self._skips_odometry(index):
                 em.on_odometry(*odo)
+                if getattr(params, "exp_create_rule", "pc_distance") == "activity":
+                    action = self._activity_action(view, action, pc)
             em.apply(
-                action, frame=index, t=float(frame.t), pc=pc, template_id=int(view.template_id)
+                action,
+                frame=index,
+                t=float(frame.t),
+                pc=pc,
+                template_id=int(view.template_id),
+                **extra,
             )
             if relax == "every_frame" or action.kind != ActionKind.NONE:
                 em.iterate()
         return int(em.current_id)
+
+    def _activity_action(
+        self, view: ViewMatch, action: Action, pc: tuple[float, float, float]
+    ) -> Action:
+        """``exp_create_rule="activity"``: the experience map decides from experience
+        activity (Eqs. 1-4) in place of the pose cells' distance rule."""
+        p = self.config.pose_cells
+        return self.experience_map.activity_action(  # type: ignore[attr-defined]
+            pc,
+            int(view.template_id),
+            dims=(float(p.pc_dim_xy), float(p.pc_dim_th)),
+            relative_rad=float(action.relative_rad),
+        )
 
     def _finish(
         self,
@@ -242,17 +265,28 @@ class RatSLAM:
         n_t, n_e = counts if counts is not None else self.counts()[:2]
         return StepResult(index, float(frame.t), view, action, odo, pc, exp_id, n_t, n_e)
 
-    def step_frame(self, frame: Frame) -> StepResult:
-        """Process one frame (sequentially) and return what it did."""
+    def step_frame(self, frame: Frame, *, behaviour: int | None = None) -> StepResult:
+        """Process one frame (sequentially) and return what it did.
+
+        Args:
+            frame: the frame.
+            behaviour: the movement behaviour executed over the frame's interval; the
+                experience map labels the frame's transition with it and monitors link
+                confidence (Eq. 9 of the experience-map paper). None: unlabelled.
+        """
         index = self.frame_index
         odo, view = self._stage_view(frame, index)
         action, pc = self._stage_pose_cells(view, odo, index)
-        exp_id = self._stage_experience_map(frame, index, view, odo, action, pc)
+        exp_id = self._stage_experience_map(frame, index, view, odo, action, pc, behaviour)
         self.frame_index += 1
         return self._finish(frame, index, view, odo, action, pc, exp_id)
 
     def step(
-        self, image: np.ndarray | torch.Tensor, odometry: tuple[float, float, float] | None = None
+        self,
+        image: np.ndarray | torch.Tensor,
+        odometry: tuple[float, float, float] | None = None,
+        *,
+        behaviour: int | None = None,
     ) -> StepResult:
         """Process one image with its odometry.
 
@@ -260,6 +294,7 @@ class RatSLAM:
             image: the camera image. Shape: ``(H, W)`` grey or ``(H, W, 3)``.
             odometry: ``(vtrans m/s, vrot rad/s, dt s)`` over the interval ending at
                 this image; None when the odometry source is visual.
+            behaviour: the movement behaviour executed (see :meth:`step_frame`).
 
         Raises:
             InputError: no odometry given while the odometry source needs it.
@@ -280,7 +315,7 @@ class RatSLAM:
             t = self._last_t + dt
         t = t if self.frame_index else 0.0
         frame = Frame(self.frame_index, t, np.asarray(image), vtrans=vtrans, vrot=vrot, dt=dt)
-        return self.step_frame(frame)
+        return self.step_frame(frame, behaviour=behaviour)
 
     # ------------------------------------------------------------------ whole runs
     def run(
@@ -288,7 +323,7 @@ class RatSLAM:
         frames: Iterable[Frame] | FrameSource | str | Path,
         *,
         max_frames: int | None = None,
-        progress: bool = True,
+        progress: bool | str | None = None,
         pipelined: bool | None = None,
         callback: Callable[[StepResult], None] | None = None,
     ) -> RunResult:
@@ -299,7 +334,8 @@ class RatSLAM:
                 (anything with ``frames()``), or a data spec (``str`` or ``Path``, e.g.
                 ``"sim:loop"``) that :func:`~torchratslam.readers.datasets.open_data` opens.
             max_frames: stop after this many frames.
-            progress: show a tqdm progress bar (frames/s, templates, experiences).
+            progress: True or a label: show a tqdm progress bar (frames/s, templates,
+                experiences); None (default): only in a notebook; False: none.
             pipelined: one worker thread per module (default: the constructor's).
             callback: called with every :class:`StepResult`, in order.
 

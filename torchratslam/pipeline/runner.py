@@ -1,7 +1,11 @@
 """What surrounds the per-frame work of :meth:`RatSLAM.run
 <torchratslam.pipeline.ratslam.RatSLAM.run>`: the frames from what the caller gave
 (:func:`open_frames`), the progress bar and callback (:class:`RunProgress`) and the
-garbage collector parked for the run (:func:`parked_gc`)."""
+garbage collector parked for the run (:func:`parked_gc`).
+
+The library shows a bar only when asked (``progress=True`` or a label) or, by default,
+in an interactive notebook (an IPython kernel, :func:`in_notebook`); a script that
+imports torchratslam and runs prints nothing."""
 
 from __future__ import annotations
 
@@ -17,7 +21,36 @@ from torchratslam.messages import Frame
 from torchratslam.pipeline.results import StepResult
 from torchratslam.protocols import FrameSource
 
-__all__ = ["RunProgress", "open_frames", "parked_gc"]
+__all__ = ["RunProgress", "in_notebook", "open_frames", "parked_gc", "show_progress"]
+
+
+def in_notebook() -> bool:
+    """Whether this process is an IPython kernel (a Jupyter notebook), where a bar is
+    shown by default."""
+    import sys
+
+    shell = sys.modules.get("IPython")
+    if shell is None:
+        return False
+    try:
+        ip = shell.get_ipython()
+    except AttributeError:
+        return False
+    return ip is not None and "IPKernelApp" in getattr(ip, "config", {})
+
+
+def show_progress(progress: bool | str | None) -> str | None:
+    """The bar's label when a bar is to be shown, else None.
+
+    Args:
+        progress: True (a bar labelled ``frames``), a label (a bar with that label),
+            False (none) or None (a bar only in a notebook, :func:`in_notebook`).
+    """
+    if progress is None:
+        progress = in_notebook()
+    if progress is False:
+        return None
+    return progress if isinstance(progress, str) and progress else "frames"
 
 
 def open_frames(
@@ -60,11 +93,12 @@ def open_frames(
 
 class RunProgress:
     """Called with every :class:`StepResult` of a run, in order: counts them, calls the
-    user's callback and updates a tqdm bar (frames/s, templates, experiences).
+    user's callback and updates a tqdm bar (labelled; frames/s, templates, experiences).
 
     Args:
         total: the number of frames expected (None: unknown).
-        show: show the bar.
+        show: True or a label: show the bar (:func:`show_progress`); None: only in a
+            notebook; False: none.
         callback: called with every result.
 
     Attributes:
@@ -75,15 +109,24 @@ class RunProgress:
         self,
         total: int | None,
         *,
-        show: bool = True,
+        show: bool | str | None = None,
         callback: Callable[[StepResult], None] | None = None,
     ) -> None:
         self.total, self.callback, self.n = total, callback, 0
         self._bar = None
-        if show:
+        label = show_progress(show)
+        if label is not None:
             from tqdm import tqdm
 
-            self._bar = tqdm(total=total, unit="frame", dynamic_ncols=True, mininterval=0.5)
+            # smoothing: the ETA follows the recent rate, not the first frames' start-up
+            self._bar = tqdm(
+                total=total,
+                desc=label,
+                unit="frame",
+                dynamic_ncols=True,
+                mininterval=0.5,
+                smoothing=0.05,
+            )
 
     def __call__(self, r: StepResult) -> None:
         self.n += 1

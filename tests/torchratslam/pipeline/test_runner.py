@@ -66,3 +66,30 @@ def test_parked_gc_freezes_only_for_the_duration():
     with pytest.raises(RuntimeError), parked_gc():
         raise RuntimeError
     assert gc.get_freeze_count() == 0
+
+
+def test_a_plain_run_prints_nothing_a_bar_only_when_asked_or_in_a_notebook(capsys, monkeypatch):
+    import sys
+    import types
+
+    from torchratslam import RatSLAM, load_config
+    from torchratslam.pipeline.runner import in_notebook, show_progress
+
+    config = load_config("virtual_tour", pc_dim_xy=11, template_x_size=16, template_y_size=4)
+    frames = [Frame(k, float(k), np.full((4, 16), k, np.uint8), vtrans=0.1) for k in range(6)]
+    capsys.readouterr()
+    RatSLAM(config).run(frames)  # import and run: no bar
+    out = capsys.readouterr()
+    assert out.err == "" and out.out == ""
+    RatSLAM(config).run(frames, progress="mapping part 1/2")  # asked: one labelled bar
+    err = capsys.readouterr().err
+    assert "mapping part 1/2" in err and "6/6" in err
+    assert show_progress(True) == "frames" and show_progress(False) is None
+    # an IPython kernel (a notebook) shows the bar by default; a terminal IPython does not
+    shell = types.SimpleNamespace(config={})
+    fake = types.ModuleType("IPython")
+    fake.get_ipython = lambda: shell  # type: ignore[attr-defined]
+    monkeypatch.setitem(sys.modules, "IPython", fake)
+    assert not in_notebook() and show_progress(None) is None
+    shell.config = {"IPKernelApp": {"connection_file": "x.json"}}
+    assert in_notebook() and show_progress(None) == "frames"

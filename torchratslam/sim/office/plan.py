@@ -15,7 +15,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-__all__ = ["OFFICE_FLOOR", "FloorPlan"]
+__all__ = ["OFFICE_FLOOR", "SMALL_FLOOR", "FloorPlan"]
 
 
 @dataclass(frozen=True)
@@ -103,3 +103,27 @@ OFFICE_FLOOR = FloorPlan(
     ),
     start=("A", 0.0),
 )
+
+
+SMALL_FLOOR = FloorPlan(
+    name="small",
+    nodes={
+        "A": (1.0, 1.0),
+        "B": (6.0, 1.0),
+        "C": (11.0, 1.0),
+        "D": (11.0, 7.0),
+        "E": (6.0, 7.0),
+        "F": (1.0, 7.0),
+    },
+    edges=(
+        ("A", "B", 1.6),
+        ("B", "C", 1.6),
+        ("C", "D", 1.6),
+        ("D", "E", 1.6),
+        ("E", "F", 1.6),
+        ("F", "A", 1.6),
+        ("B", "E", 1.6),
+    ),
+    start=("A", 0.0),
+)
+"""A 10 m x 6 m loop with a cross corridor: the quick experiments' floor."""

@@ -1,0 +1,216 @@
+"""Exploration and navigation trials of the office robot (Sections IV-VI).
+
+A goal is marked during exploration: the experience current when the robot passed
+nearest the goal's place. A trial then repeats, every frame: find the route from the
+current experience (afresh when the experience changes, else every ``replan_s``), keep
+the last good one through route loss (:func:`~ratslam_graph.navigation.recovery.track_route`)
+and explore once it times out, choose the behaviour whose local path is closest to the
+route, drive, and map the frame with the behaviour it executed. The trial ends when the
+robot believes it is at the goal (its map position within ``arrive_m`` of the goal
+experience) or at the time limit; it succeeded when the ground truth is then within
+``reach_m`` of the goal.
+
+Example:
+    >>> from torchratslam.navigation.agent import NavigationAgent  # doctest: +SKIP
+    >>> agent = NavigationAgent(robot)  # doctest: +SKIP
+    >>> agent.navigate(agent.mark_goal("r2")).reached  # doctest: +SKIP
+    True
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass, field
+
+import networkx as nx
+import numpy as np
+
+from ratslam_graph.errors import InputError
+from ratslam_graph.experience_map import ExperienceMap
+from ratslam_graph.navigation.recovery import (
+    RecoveryMode,
+    RecoveryParams,
+    RecoveryState,
+    track_route,
+)
+from ratslam_graph.navigation.route import route_positions
+from torchratslam.navigation.params import NavParams
+from torchratslam.navigation.planner import arbitrate, local_options, map_pose, plan_route
+from torchratslam.navigation.robot import MappingRobot
+from torchratslam.sim.office.builder import Office
+from torchratslam.sim.office.motion import Behaviour
+
+__all__ = ["Goal", "NavigationAgent", "Trial", "shortest_path_m"]
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class Goal:
+    """A goal: a place on the floor and the experience marked for it.
+
+    Attributes:
+        name: the floor-plan node.
+        xy: its position (m).
+        exp: the goal experience.
+    """
+
+    name: str
+    xy: tuple[float, float]
+    exp: int
+
+
+@dataclass(frozen=True)
+class Trial:
+    """One navigation trial.
+
+    Attributes:
+        goal: the goal.
+        reached: the ground truth ended within ``reach_m`` of the goal.
+        path_m: distance driven (m).
+        shortest_m: the shortest path on the floor from the start (m).
+        time_s: the trial's duration (s).
+        first_route: the experiences of the first route planned.
+        routes_xy: ground-truth places of the first route's experiences, (R, 2).
+        path_xy: the ground-truth path driven, (T, 2).
+        planning_ms: temporal-map times of the trial (ms).
+        lost_s: time spent without a route (recovering or exploring, s).
+        deleted, relearnt: links deleted and relearnt during the trial.
+    """
+
+    goal: Goal
+    reached: bool
+    path_m: float
+    shortest_m: float
+    time_s: float
+    first_route: tuple[int, ...]
+    routes_xy: np.ndarray
+    path_xy: np.ndarray
+    planning_ms: tuple[float, ...] = field(default=())
+    lost_s: float = 0.0
+    deleted: int = 0
+    relearnt: int = 0
+
+
+def shortest_path_m(office: Office, xy: np.ndarray, u: int, v: int, goal: int) -> float:
+    """Length of the shortest way along the passages from ``xy`` (on passage ``u-v``) to
+    node ``goal`` (m)."""
+    g = nx.Graph()
+    for a, b in office.edges.tolist():
+        g.add_edge(a, b, weight=float(np.hypot(*(office.nodes[a] - office.nodes[b]))))
+    g.add_edge("here", u, weight=float(np.hypot(*(office.nodes[u] - xy))))
+    g.add_edge("here", v, weight=float(np.hypot(*(office.nodes[v] - xy))))
+    return float(nx.shortest_path_length(g, "here", goal, weight="weight"))
+
+
+class NavigationAgent:
+    """Goal navigation on the robot's experience map.
+
+    Args:
+        robot: the mapping robot.
+        params: the navigator's settings.
+    """
+
+    def __init__(self, robot: MappingRobot, params: NavParams | None = None) -> None:
+        self.robot = robot
+        self.params = params if params is not None else NavParams()
+
+    @property
+    def em(self) -> ExperienceMap:
+        """The robot's experience map."""
+        return self.robot.slam.experience_map  # type: ignore[return-value]
+
+    def mark_goal(self, name: str) -> Goal:
+        """The goal at node ``name``: the experience current when the robot passed
+        nearest it so far.
+
+        Raises:
+            InputError: the robot never came within ``reach_m`` of it.
+        """
+        r = self.robot
+        xy = r.office.nodes[r.office.node(name)]
+        traj = r.trajectory()
+        d = np.hypot(*(traj[:, :2] - xy).T)
+        k = int(np.argmin(d))
+        if d[k] > self.params.reach_m:
+            raise InputError(f"the robot has not been within {self.params.reach_m} m of {name}")
+        return Goal(name, (float(xy[0]), float(xy[1])), int(r.exp_ids[k]))
+
+    def _arrived(self, goal: Goal) -> bool:
+        em = self.em
+        here = map_pose(em)[:2]
+        return bool(np.hypot(*(em.poses[goal.exp, :2] - here)) <= self.params.arrive_m)
+
+    def navigate(self, goal: Goal) -> Trial:
+        """Drive to ``goal`` (see the module docstring)."""
+        p, r = self.params, self.robot
+        sim, o = r.sim, r.office
+        m = sim.state
+        start_xy = sim.pose[:2].copy()
+        shortest = shortest_path_m(o, start_xy, m.u, m.v, o.node(goal.name))
+        limit = p.time_factor * shortest / sim.params.motion.speed + p.time_slack_s
+        t0, f0 = r.time, len(r.poses)
+        del0, rel0 = r.links.deleted, r.links.relearnt
+        rec = RecoveryParams(timeout_s=p.recovery_timeout_s)
+        state = RecoveryState()
+        last_exp, last_plan, last_turn = -2, -np.inf, -np.inf
+        first: tuple[int, ...] | None = None
+        ms: list[float] = []
+        lost = 0.0
+        truth = r.experience_truth()
+        first_xy = np.zeros((0, 2))
+        while r.time - t0 < limit and not self._arrived(goal):
+            now = r.time
+            if r.exp_id != last_exp or now - last_plan >= p.replan_s:
+                plan = plan_route(self.em, goal.exp)
+                ms.append(plan.ms)
+                state = track_route(state, plan.route, now, rec)
+                last_exp, last_plan = r.exp_id, now
+                if first is None and plan.route is not None:
+                    first = tuple(plan.route.ids)
+                    truth = r.experience_truth()
+                    first_xy = truth[np.asarray(first, dtype=np.int64)]
+            if state.mode is RecoveryMode.EXPLORING or state.route is None:
+                lost += sim.params.motion.dt
+                b = sim.explore()
+            else:
+                route = state.route
+                if state.mode is RecoveryMode.RECOVERING:
+                    lost += sim.params.motion.dt
+                    k = route.ids.index(state.target)
+                    ids = route.ids[max(k - 1, 0) :]
+                else:
+                    ids = route.ids
+                xy = route_positions(self.em.poses, type(route)(ids=ids, times=[0.0] * len(ids)))
+                m = sim.state
+                opts = local_options(o, sim.local_paths(), m.u, m.v, sim.params.motion.path_step)
+                b, _ = arbitrate(
+                    opts,
+                    sim.pose,
+                    map_pose(self.em),
+                    xy,
+                    lookahead_m=p.lookahead_m,
+                    turn_margin_m=p.turn_margin_m,
+                    allow_turn=now - last_turn >= p.turn_cooldown_s,
+                )
+                if b is Behaviour.TURN_AROUND:
+                    last_turn = now
+            r.tick(int(b))
+        path = r.trajectory()[f0 - 1 :, :2]
+        driven = float(np.hypot(*np.diff(path, axis=0).T).sum())
+        reached = bool(np.hypot(*(sim.pose[:2] - np.asarray(goal.xy))) <= p.reach_m)
+        log.info("goal %s: reached=%s in %.0f s", goal.name, reached, r.time - t0)
+        return Trial(
+            goal=goal,
+            reached=reached,
+            path_m=driven,
+            shortest_m=shortest,
+            time_s=r.time - t0,
+            first_route=first or (),
+            routes_xy=first_xy,
+            path_xy=path,
+            planning_ms=tuple(ms),
+            lost_s=lost,
+            deleted=r.links.deleted - del0,
+            relearnt=r.links.relearnt - rel0,
+        )

@@ -1,0 +1,97 @@
+"""The navigator's settings and the RatSLAM configuration of the office robot.
+
+Example:
+    >>> from torchratslam.navigation.params import office_config
+    >>> office_config(28, 36).pose_cells.pc_dim_xy
+    28
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+from torchratslam.config import RatSLAMConfig
+from torchratslam.errors import ConfigError
+
+__all__ = ["NavParams", "office_config"]
+
+
+@dataclass(frozen=True)
+class NavParams:
+    """How the navigator plans and chooses behaviours.
+
+    Attributes:
+        lookahead_m: arbitration compares local paths with the route's first metres.
+        turn_margin_m: turning around must beat the best forward path by this (m).
+        turn_cooldown_s: no deliberate turn-around within this long of the last one.
+        replan_s: the route is found afresh at least this often (and whenever the
+            current experience changes).
+        arrive_m: the robot believes it has arrived when its map position is this close
+            to the goal experience's.
+        reach_m: a trial succeeds when the ground truth is this close to the goal (m).
+        recovery_timeout_s: route-loss recovery relies on the last route this long.
+        time_factor: a trial's time limit is this times the shortest path's driving time,
+            plus ``time_slack_s``.
+        time_slack_s: see ``time_factor``.
+        junction_m: the held branch behaviour labels frames within this of a junction.
+    """
+
+    lookahead_m: float = 3.0
+    turn_margin_m: float = 0.6
+    turn_cooldown_s: float = 4.0
+    replan_s: float = 1.0
+    arrive_m: float = 0.8
+    reach_m: float = 1.5
+    recovery_timeout_s: float = 10.0
+    time_factor: float = 4.0
+    time_slack_s: float = 60.0
+    junction_m: float = 1.5
+
+    def __post_init__(self) -> None:
+        for name in ("lookahead_m", "arrive_m", "reach_m", "time_factor", "junction_m"):
+            if not getattr(self, name) > 0:
+                raise ConfigError(f"NavParams.{name}={getattr(self, name)} must be > 0")
+
+
+def office_config(
+    pc_dim_xy: int,
+    pc_dim_th: int = 36,
+    *,
+    create_rule: str = "pc_distance",
+    confidence_threshold: float = 0.5,
+    **overrides: Any,
+) -> RatSLAMConfig:
+    """RatSLAM for the office robot: 12 x 8 grey views, 0.25 m x 10 degree pose cells
+    (as the paper's), links deleted below ``confidence_threshold`` (Eq. 9).
+
+    Args:
+        pc_dim_xy, pc_dim_th: the pose-cell matrix.
+        create_rule: ``exp_create_rule`` (``pc_distance`` or ``activity``).
+        confidence_threshold: ``exp_link_confidence_threshold``.
+        overrides: any other config keys.
+    """
+    flat: dict[str, Any] = {
+        "pc_dim_xy": pc_dim_xy,
+        "pc_dim_th": pc_dim_th,
+        "pc_cell_x_size": 0.25,
+        "exp_delta_pc_threshold": 1.0,
+        "pc_decode": "exact",
+        "pc_axis": "math",
+        "skip_first_odometry": False,
+        "template_x_size": 12,
+        "template_y_size": 8,
+        "vt_shift_match": 0,
+        "vt_step_match": 1,
+        "vt_match_threshold": 0.05,
+        "pc_vt_inject_energy": 0.1,
+        "exp_first_at_origin": True,
+        "exp_link_time": "per_link",
+        "exp_link_confidence_threshold": confidence_threshold,
+        "exp_create_rule": create_rule,
+        "exp_activity_zone_xy": 2.0,
+        "exp_activity_zone_th": 2.0,
+        "exp_activity_threshold": 1.0,
+    }
+    flat.update(overrides)
+    return RatSLAMConfig.from_flat(flat, source="office_config")

@@ -1,0 +1,194 @@
+"""Route planning and behaviour arbitration on the experience map (Section IV).
+
+:func:`plan_route` seeds the temporal map at the current (peak) experience (Eqs.
+10-11) and climbs it from the goal; :func:`map_pose` is the robot's pose in the
+experience map (its current experience plus the odometry since);
+:func:`arbitrate` brings the local movement paths (egocentric, from the local movement
+module) into the map's frame and chooses the one closest to the route (Fig. 7).
+
+Example:
+    >>> import numpy as np
+    >>> from torchratslam.navigation.planner import to_map_frame
+    >>> to_map_frame(np.array([[1.0, 0.0]]), np.zeros(3), np.array([5.0, 0.0, np.pi / 2])).round(6)
+    array([[5., 1.]])
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from ratslam_graph.errors import GraphError
+from ratslam_graph.experience_map import ExperienceMap
+from ratslam_graph.features import Route
+from ratslam_graph.geometry import wrap_angle
+from ratslam_graph.navigation.arbitration import choose_path, route_ahead
+from ratslam_graph.navigation.route import climb_route
+from ratslam_graph.navigation.temporal import TemporalMap, adjacency, temporal_map
+from torchratslam.sim.office.builder import Office
+from torchratslam.sim.office.motion import Behaviour, options
+
+__all__ = ["Plan", "arbitrate", "local_options", "map_pose", "plan_route", "to_map_frame"]
+
+
+@dataclass(frozen=True)
+class Plan:
+    """A planned route.
+
+    Attributes:
+        route: from the current experience to the goal (None: the goal has no finite
+            time stamp, the route is lost).
+        tmap: the temporal map it was climbed on.
+        ms: time to build the temporal map (ms).
+    """
+
+    route: Route | None
+    tmap: TemporalMap
+    ms: float
+
+
+def plan_route(
+    em: ExperienceMap,
+    goal: int,
+    *,
+    radius_m: float = 1.0,
+    speed: float = 0.5,
+    turn_rate: float = np.pi / 2,
+) -> Plan:
+    """The temporal map from the robot's place and the route to ``goal``.
+
+    The temporal map is seeded at the current (peak) experience and at the experiences
+    that overlap it in the map (other representations of the same place, within
+    ``radius_m`` of the robot's map pose), each at the time it takes to get there
+    (distance over ``speed`` plus the turn over ``turn_rate``); the goal is likewise
+    reached at any experience overlapping the goal experience. Both are done with two
+    extra nodes linked to those experiences, so Eqs. 10-11 and the climb run as they are.
+
+    Args:
+        em: the experience map.
+        goal: the goal experience.
+        radius_m: how close experiences overlap (m).
+        speed, turn_rate: the robot's driving speed (m/s) and turning rate (rad/s).
+    """
+    links = em.store
+    n, e = links.n, links.e
+    t0 = time.perf_counter()
+    poses = em.poses
+    here = map_pose(em)
+    d = np.hypot(*(poses[:, :2] - here[:2]).T)
+    turn = np.abs(wrap_angle(poses[:, 2] - here[2]))
+    near = np.flatnonzero(d <= radius_m)
+    near = np.union1d(near, [max(em.current_id, 0)]).astype(np.int64)
+    dg = np.hypot(*(poses[:, :2] - poses[goal, :2]).T)
+    at_goal = np.union1d(np.flatnonzero(dg <= radius_m), [goal]).astype(np.int64)
+    src = np.concatenate([links.src[:e], np.full(len(near), n), at_goal])
+    dst = np.concatenate([links.dst[:e], near, np.full(len(at_goal), n + 1)])
+    dt = np.concatenate(
+        [links.link[:e, 3], d[near] / speed + turn[near] / turn_rate, dg[at_goal] / speed]
+    )
+    adj = adjacency(n + 2, src, dst, dt)
+    tmap = temporal_map(n + 2, start=n, adj=adj)
+    ms = 1000.0 * (time.perf_counter() - t0)
+    try:
+        full = climb_route(tmap, adj, n + 1)
+        route: Route | None = Route(ids=full.ids[1:-1], times=full.times[1:-1])
+    except GraphError:
+        route = None
+    return Plan(route, tmap, ms)
+
+
+def map_pose(em: ExperienceMap) -> np.ndarray:
+    """The robot's ``[x, y, heading]`` in the experience map: the current experience's
+    position plus the odometry accumulated since, heading the accumulated facing."""
+    p = em.poses[max(em.current_id, 0)]
+    return np.array([p[0] + em.accum_x, p[1] + em.accum_y, em.accum_facing])
+
+
+def to_map_frame(points: np.ndarray, world_pose: np.ndarray, est_pose: np.ndarray) -> np.ndarray:
+    """Points seen from the robot at ``world_pose`` placed around its map pose ``est_pose``.
+
+    Shape:
+        points: (P, 2); world_pose, est_pose: (3,). Returns (P, 2).
+    """
+    d = np.asarray(points, np.float64).reshape(-1, 2) - world_pose[:2]
+    a = float(est_pose[2] - world_pose[2])
+    c, s = np.cos(a), np.sin(a)
+    return np.stack([c * d[:, 0] - s * d[:, 1], s * d[:, 0] + c * d[:, 1]], 1) + est_pose[:2]
+
+
+def _ahead_of_robot(route_xy: np.ndarray, here: np.ndarray, window: int = 6) -> np.ndarray:
+    """The route from its node nearest the robot (among the first ``window``) on, with
+    the robot's position first."""
+    k = int(np.argmin(np.hypot(*(route_xy[:window] - here).T)))
+    return np.vstack([here[None, :], route_xy[k + 1 :]]) if k + 1 < len(route_xy) else here[None]
+
+
+def local_options(
+    office: Office, sim_paths: Mapping[Behaviour, np.ndarray], u: int, v: int, step: float
+) -> list[tuple[Behaviour, np.ndarray]]:
+    """The local movement paths as ``(behaviour, path)`` pairs: the simulator's, with the
+    turn-around continued past ``u`` along each way out there (one pair each)."""
+    out: list[tuple[Behaviour, np.ndarray]] = [
+        (b, p) for b, p in sim_paths.items() if b is not Behaviour.TURN_AROUND
+    ]
+    back = sim_paths[Behaviour.TURN_AROUND]
+    ways = [w for b, w in options(office, v, u).items() if b is not Behaviour.TURN_AROUND]
+    for w in ways or [v]:
+        a, b = office.nodes[u], office.nodes[w]
+        n = max(1, int(np.ceil(np.hypot(*(b - a)) / step)))
+        more = a + np.linspace(0.0, 1.0, n + 1)[1:, None] * (b - a)
+        out.append((Behaviour.TURN_AROUND, np.vstack([back, more])))
+    return out
+
+
+def arbitrate(
+    paths: Sequence[tuple[Behaviour, np.ndarray]],
+    world_pose: np.ndarray,
+    est_pose: np.ndarray,
+    route_xy: np.ndarray,
+    *,
+    lookahead_m: float,
+    turn_margin_m: float,
+    allow_turn: bool = True,
+) -> tuple[Behaviour, dict[Behaviour, float]]:
+    """The behaviour whose local path is closest to the route (Fig. 7).
+
+    Every path and the route are cut to their first ``lookahead_m`` metres (from the
+    robot); a behaviour offered with several paths counts its closest; turning around
+    must be closer by ``turn_margin_m`` than the best forward path. Ties go to the
+    first path offered.
+
+    Args:
+        paths: ``(behaviour, path)`` pairs in the world frame, as the local movement
+            module sees them (:func:`local_options`).
+        world_pose: the robot's pose in the paths' frame.
+        est_pose: its pose in the experience map (:func:`map_pose`).
+        route_xy: the route's experience positions.
+        lookahead_m: length compared.
+        turn_margin_m: the turn-around's handicap (m).
+        allow_turn: False rules turning around out.
+
+    Shape:
+        route_xy: (R, 2).
+
+    Returns:
+        The behaviour and each behaviour's distance (m, the handicap included).
+    """
+    route = route_ahead(
+        _ahead_of_robot(np.asarray(route_xy, np.float64), est_pose[:2]), lookahead_m
+    )
+    here = world_pose[:2][None, :]
+    offered = [(b, p) for b, p in paths if allow_turn or b is not Behaviour.TURN_AROUND]
+    mapped = [
+        to_map_frame(route_ahead(np.vstack([here, p]), lookahead_m), world_pose, est_pose)
+        for _, p in offered
+    ]
+    d = choose_path(mapped, route).distances
+    best: dict[Behaviour, float] = {}
+    for (b, _), v in zip(offered, d.tolist()):
+        v += turn_margin_m if b is Behaviour.TURN_AROUND else 0.0
+        best[b] = min(best.get(b, np.inf), v)
+    return min(best, key=lambda b: best[b]), best
