@@ -3,10 +3,14 @@ in the paper's convention and the project's, the rigid transform, ATE against gr
 truth when there is one, and the overlay figure. ``torchratslam compare-maps`` is the
 command-line front end.
 
-Conventions: map A is the *template* (fixed; the paper's single-session map) and map B
-the *model* (moved; the paper's multisession map). ``icp.libicp_mse_m2`` is the paper's
-figure (LibICP residual, mean squared nearest-neighbour distance, m^2);
-``icp.icp_rmse_m`` the project's RMSE (m); see :mod:`torchratslam.eval.icp`.
+Conventions, LibICP's: map A is the *template* (the paper's single-session map), the
+map that **moves**; map B is the *model* (the paper's multisession map), fixed, the one
+the nearest neighbours are searched in. ``icp.libicp_mse_m2`` is the paper's figure
+(LibICP residual from the identity, mean squared nearest-neighbour distance, m^2; the
+authors' Lab Tour saves give their 0.00883269); ``icp.libicp_best_mse_m2`` and
+``icp.libicp_spread_m2`` come from several start rotations, with a warning when the
+identity start stopped in a worse minimum; ``icp.icp_rmse_m`` is the project's RMSE
+(m). See :mod:`torchratslam.eval.icp`.
 """
 
 from __future__ import annotations
@@ -17,16 +21,18 @@ from typing import Any
 
 import numpy as np
 
+from ratslam_graph.atomic import atomic_write_text
 from torchratslam.errors import InputError
-from torchratslam.eval.icp import compare_icp, libicp_point_to_point
+from torchratslam.eval.groundtruth import check_groundtruth_covers
+from torchratslam.eval.icp import compare_icp, libicp_starts
 from torchratslam.maps.io import load_state, map_format
 from torchratslam.viz.plots import draw_icp_overlay, save_figure
 
-__all__ = ["compare_maps", "load_groundtruth", "map_ate"]
+__all__ = ["ROLES", "compare_maps", "load_groundtruth", "map_ate", "summary_text", "write_json"]
 
 ROLES = (
-    "A is the template (fixed: the paper's single-session map), B the model (moved onto A: "
-    "the paper's multisession map)"
+    "A (the single-session map, LibICP's template) is moved onto B (the multisession map, "
+    "LibICP's model, fixed)"
 )
 
 
@@ -84,11 +90,11 @@ def compare_maps(
     groundtruth: str | Path | None = None,
     figure: str | Path | None = None,
 ) -> dict[str, Any]:
-    """Compare map B with map A (any supported format).
+    """Compare map A with map B (any supported format): A moved onto B.
 
     Args:
-        a: the template map (fixed), e.g. the single-session map.
-        b: the model map (moved), e.g. the multisession map.
+        a: the template map (moved), e.g. the single-session map.
+        b: the model map (fixed), e.g. the multisession map.
         config: a ``RatSLAMConfig`` or flat dict (shapes reference-format templates).
         groundtruth: a ground-truth CSV or dataset spec; default: the dataset a
             ``torchratslam run`` OUT directory names in its metrics.json, if any.
@@ -111,12 +117,21 @@ def compare_maps(
             gt_src = None
     out: dict[str, Any] = {"roles": ROLES}
     for key, p, s in (("a", pa, sa), ("b", pb, sb)):
+        if gt is not None and s.n_experiences > 1 and np.ptp(s.exp_t) > 0:
+            check_groundtruth_covers(s.exp_t, s.exp_pose, gt, source=str(gt_src), what=str(p))
         ate, why = map_ate(s, gt)
         out[key] = {"path": str(p), "format": map_format(p), **s.summary(), "ate_rmse_m": ate}
         if ate is None:
             out[key]["ate_note"] = why
-    out["icp"] = compare_icp(sa.exp_pose, sb.exp_pose)
-    out["icp"]["units"] = {"libicp_mse_m2": "m^2", "icp_rmse_m": "m", "icp_rmse_swapped_m": "m"}
+    starts = libicp_starts(sa.exp_pose, sb.exp_pose)
+    out["icp"] = compare_icp(sa.exp_pose, sb.exp_pose, starts=starts)
+    out["icp"]["units"] = {
+        "libicp_mse_m2": "m^2",
+        "libicp_best_mse_m2": "m^2",
+        "libicp_spread_m2": "m^2",
+        "icp_rmse_m": "m",
+        "icp_rmse_swapped_m": "m",
+    }
     out["groundtruth"] = gt_src
     out["figure"] = None
     if figure is not None:
@@ -125,14 +140,14 @@ def compare_maps(
         matplotlib.use("Agg", force=False)
         import matplotlib.pyplot as plt
 
-        lib = libicp_point_to_point(sa.exp_pose, sb.exp_pose)
+        lib = starts.identity
         fig, ax = plt.subplots(figsize=(5.5, 5))
         draw_icp_overlay(
             ax,
-            sa.exp_pose,
+            sb.exp_pose,
             lib.aligned,
-            fixed_label=f"A: {_label(pa)} (fixed)",
-            moved_label=f"B: {_label(pb)} (ICP-aligned)",
+            fixed_label=f"B: {_label(pb)} (fixed)",
+            moved_label=f"A: {_label(pa)} (ICP-aligned)",
             mse_m2=lib.residual_m2,
         )
         fp = Path(figure)
@@ -168,13 +183,27 @@ def summary_text(report: dict[str, Any]) -> str:
             f"{key.upper()}: {r['path']} ({r['format']}): {r['templates']} templates, "
             f"{r['experiences']} experiences, {r['links']} links; ATE {ate}"
         )
+    n_starts = len(ic["libicp_starts"])
     lines += [
-        f"ICP, the paper's figure (LibICP residual, B moved onto A): "
+        f"ICP, the paper's figure (LibICP residual from the identity, A moved onto B): "
         f"{ic['libicp_mse_m2']:.6g} m^2 after {ic['libicp_iterations']} iterations",
-        f"ICP RMSE, the project's figure: {ic['icp_rmse_m']:.6g} m (B moved onto A), "
-        f"{ic['icp_rmse_swapped_m']:.6g} m (A moved onto B)",
-        f"rigid transform of B: dth {t['dth_rad']:.6g} rad, t ({t['tx_m']:.6g}, {t['ty_m']:.6g}) m",
+        f"ICP from {n_starts} start rotations of A: best {ic['libicp_best_mse_m2']:.6g} m^2 "
+        f"(start {ic['libicp_best_start_deg']:.0f} deg), spread {ic['libicp_spread_m2']:.4g} "
+        f"m^2" + ("" if ic["libicp_starts_agree"] else " (the starts end in different minima)"),
+        f"ICP RMSE, the project's figure: {ic['icp_rmse_m']:.6g} m (A moved onto B), "
+        f"{ic['icp_rmse_swapped_m']:.6g} m (B moved onto A)",
+        f"rigid transform of A: dth {t['dth_rad']:.6g} rad, t ({t['tx_m']:.6g}, {t['ty_m']:.6g}) m",
     ]
+    if ic.get("libicp_warning"):
+        lines.append(f"warning: {ic['libicp_warning']}")
     if report.get("figure"):
         lines.append(f"figure: {report['figure']}")
     return "\n".join(lines)
+
+
+def write_json(report: dict[str, Any], path: str | Path) -> Path:
+    """The report as JSON at ``path`` (parent folders made), written atomically."""
+    out = Path(path)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    atomic_write_text(out, json.dumps(report, indent=2) + "\n")
+    return out

@@ -22,6 +22,7 @@ from torchratslam.maps.state import MapState
 
 __all__ = [
     "ABLATION_MARGIN",
+    "ANCHORED_SESSION_OPTIONS",
     "RECOMMENDED_MERGE_OPTIONS",
     "RECOMMENDED_SESSION_OPTIONS",
     "SEED_TOLERANCE",
@@ -48,6 +49,10 @@ RECOMMENDED_SESSION_OPTIONS: dict[str, Any] = {"merge_persist": 2, "merge_absorb
 """The :class:`MultiSessionRatSLAM` options recommended with
 :data:`RECOMMENDED_MERGE_OPTIONS` (a match confirmed by the next new template, the
 first matching template identified with its stored match)."""
+ANCHORED_SESSION_OPTIONS: dict[str, Any] = {**RECOMMENDED_SESSION_OPTIONS, "merge_anchor": "view"}
+""":data:`RECOMMENDED_SESSION_OPTIONS` with the maps joined where the view matches the
+stored template best (``merge_anchor="view"``): on held-out seeds no merge more than 1 m
+off (docs/multisession.md, "Held-out seeds")."""
 
 
 def _gt_at(gt: np.ndarray, t: float) -> np.ndarray:

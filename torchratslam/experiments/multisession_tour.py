@@ -54,7 +54,12 @@ PAPER_ICP_RMSE = PAPER_ICP_MSE_M2  # the paper prints "RMSE", but its figures ar
 """ICP RMSE between the multisession and single-session maps in the paper (Figs. 10, 14,
 16; units as printed there)."""
 
-TOUR_CONFIG = {"virtual_tour": "virtual_tour", "lab_tour": "lab_tour", "irat_like": "irat"}
+TOUR_CONFIG = {
+    "virtual_tour": "virtual_tour",
+    "lab_tour": "lab_tour",
+    "irat_like": "irat",
+    "new_college": "new_college",
+}
 """The shipped config of each tour, used unmodified when no config is given."""
 
 _METRIC_KEYS = ("error", "initial_error", "ate_rmse_m", "time_s")
@@ -294,7 +299,8 @@ def _comparison(
     from torchratslam.eval.icp import libicp_point_to_point
 
     s_xy, m_xy = single.exp_pose[:, :2], final.exp_pose[:, :2]
-    # the paper's figure: LibICP, single-session map fixed (template), multisession moved
+    # the paper's figure: LibICP, the single-session map (template) moved onto the
+    # multisession map (model)
     lib = libicp_point_to_point(s_xy, m_xy) if len(s_xy) and len(m_xy) else None
     gt = clock.gt
     extent = float(np.linalg.norm(np.ptp(gt[:, 1:3], axis=0)))
@@ -326,9 +332,9 @@ def _comparison(
         "icp_note": (
             "icp_libicp_mse_m2 compares with paper_icp_mse_m2: both are LibICP residuals, "
             "the mean squared nearest-neighbour distance in m^2 after point-to-point ICP "
-            "from the identity with the single-session map fixed and the multisession "
-            "map moved; icp_rmse* are the project's RMSEs in m (not comparable with the "
-            "paper)"
+            "from the identity with the single-session map (LibICP's template) moved onto "
+            "the multisession map (its model); icp_rmse* are the project's RMSEs in m "
+            "(not comparable with the paper)"
         ),
         "merges": [
             {
@@ -562,6 +568,8 @@ class MultisessionOptions:
         merge_threshold: :class:`MultiSessionRatSLAM` ``merge_threshold`` (None: the paper's).
         merge_persist: :class:`MultiSessionRatSLAM` ``merge_persist`` (1: the paper's).
         merge_absorb: :class:`MultiSessionRatSLAM` ``merge_absorb`` (False: the paper's).
+        merge_anchor: :class:`MultiSessionRatSLAM` ``merge_anchor`` ("template": the
+            paper's; "view": join the maps where the view matches best).
     """
 
     ablation: bool = False
@@ -577,6 +585,7 @@ class MultisessionOptions:
     merge_threshold: float | None = None
     merge_persist: int = 1
     merge_absorb: bool = False
+    merge_anchor: str = "template"
 
 
 def run_experiment(
@@ -631,8 +640,15 @@ def run_experiment(
                     ("merge_threshold", o.merge_threshold),
                     ("merge_persist", o.merge_persist),
                     ("merge_absorb", o.merge_absorb),
+                    ("merge_anchor", o.merge_anchor),
                 )
-                if v != {"merge_threshold": None, "merge_persist": 1, "merge_absorb": False}[k]
+                if v
+                != {
+                    "merge_threshold": None,
+                    "merge_persist": 1,
+                    "merge_absorb": False,
+                    "merge_anchor": "template",
+                }[k]
             },
         )
     finally:

@@ -51,6 +51,7 @@ __all__ = [
     "EXP_PC_SHIFTS",
     "MATCH_EXPS",
     "MergeResult",
+    "append_place",
     "first_experience",
     "fuse_templates",
     "merge_maps",
@@ -432,6 +433,103 @@ def merge_maps(
         "" if shift_pose_cells else " (not applied)",
     )
     return MergeResult(state=dataclasses.replace(merged), info=info)
+
+
+def append_place(
+    state: MapState,
+    view: np.ndarray,
+    *,
+    at_accum: np.ndarray,
+    at_pc: np.ndarray,
+    frame: int,
+    t: float,
+) -> MapState:
+    """Add a place the robot passed since its current experience: a template holding
+    ``view``, associated with the packet ``at_pc``, and an experience at the current
+    experience's pose plus ``at_accum``, linked from the current experience, made current.
+
+    This is what RatSLAM itself does when a view is new (``CREATE``), done afterwards for
+    a view that matched a stored map (:class:`~torchratslam.multisession.session.
+    MultiSessionRatSLAM` with ``merge_anchor="view"``): the merge then identifies this
+    template and experience with the stored ones, at the place where the view matched
+    best. The odometry accumulated since ``at_accum`` stays accumulated (relative to the
+    new experience).
+
+    Args:
+        state: the partial map (with its ``EM_ACCUM`` and ``PC_BEST`` extras).
+        view: the preprocessed view. Shape: ``(Y, X)``.
+        at_accum: the experience map's accumulators ``[x, y, facing, time]`` when the
+            view was seen (map frame, as ``EM_ACCUM``).
+        at_pc: the packet centre ``(x, y, th)`` cells when the view was seen.
+        frame: the frame the view was seen at; ``t``: its time (s).
+
+    Returns:
+        The map with one template, one experience and one link more.
+
+    Raises:
+        GraphError: the map has no current experience.
+    """
+    cur = int(state.current_exp)
+    if not 0 <= cur < state.n_experiences:
+        raise GraphError("append_place needs a map with a current experience")
+    acc = np.asarray(at_accum, np.float64).reshape(4)
+    pc = np.mod(np.asarray(at_pc, np.float64).reshape(3), np.asarray(state.pc_dims, np.float64))
+    now = np.asarray(state.extra.get(EM_ACCUM, acc), np.float64).reshape(4)
+    th_src = float(state.exp_pose[cur, 2])
+    facing = float(wrap_angle(acc[2], include_pi=True))
+    pose = np.array([state.exp_pose[cur, 0] + acc[0], state.exp_pose[cur, 1] + acc[1], facing])
+    link = (
+        math.hypot(acc[0], acc[1]),
+        float(wrap_angle(math.atan2(acc[1], acc[0]) - th_src, include_pi=True)),
+        float(wrap_angle(facing - th_src, include_pi=True)),
+    )
+    per_link = str(state.config.get("exp_link_time", "per_link")) == "per_link"
+    n_t, n_e = state.n_templates, state.n_experiences
+    view = np.asarray(view, state.templates.dtype).reshape(state.templates.shape[1:])
+    fill = {"exp:pc_template": n_t, "exp:em_pc": pc}
+    extra: dict[str, np.ndarray] = {}
+    for key, val in state.extra.items():
+        prefix = key.split(":", 1)[0] if ":" in key else ""
+        arr = np.asarray(val)
+        if prefix in PER_ENTITY:
+            row = np.broadcast_to(
+                np.asarray(fill.get(key, _FILL.get(key, 0)), arr.dtype), arr.shape[1:]
+            )
+            extra[key] = np.concatenate([arr, row[None]])
+        else:
+            extra[key] = np.array(arr, copy=True)
+    extra[EM_ACCUM] = np.array(
+        [now[0] - acc[0], now[1] - acc[1], now[2], now[3] - acc[3] if per_link else now[3]],
+        np.float64,
+    )
+    scalars = {k: v for k, v in state.scalars.items() if k != "pc.current_exp"}
+    decay = float(state.config.get("vt_active_decay", 1.0))
+    out = dataclasses.replace(
+        state,
+        templates=np.concatenate([state.templates, view[None]]),
+        template_mean=np.r_[state.template_mean, float(view.mean())],
+        template_frame=np.r_[state.template_frame, int(frame)].astype(np.int64),
+        template_pc=np.concatenate([state.template_pc, pc[None]]),
+        template_decay=np.r_[state.template_decay, decay],
+        exp_pose=np.concatenate([state.exp_pose, pose[None]]),
+        exp_pc=np.concatenate([state.exp_pc, pc[None]]),
+        exp_template=np.r_[state.exp_template, n_t].astype(np.int64),
+        exp_frame=np.r_[state.exp_frame, int(frame)].astype(np.int64),
+        exp_t=np.r_[state.exp_t, float(t)],
+        link_from=np.r_[state.link_from, cur].astype(np.int64),
+        link_to=np.r_[state.link_to, n_e].astype(np.int64),
+        link_d=np.r_[state.link_d, link[0]],
+        link_heading=np.r_[state.link_heading, link[1]],
+        link_facing=np.r_[state.link_facing, link[2]],
+        link_dt=np.r_[state.link_dt, acc[3]],
+        extra=extra,
+        scalars=scalars,
+        current_vt=n_t,
+        prev_vt=int(state.current_vt),
+        current_exp=n_e,
+        prev_exp=cur,
+    )
+    return out.validate(source="append_place")
 
 
 def fuse_templates(

@@ -61,6 +61,7 @@ from ratslam_graph.geometry import wrap_angle
 from torchratslam.errors import ConfigError, InputError, MapFormatError
 from torchratslam.mbaram.match import ChannelNodes, MatchResult, learn_node, log_match, select
 from torchratslam.mbaram.params import STATE_VERSION, MBARAMParams
+from torchratslam.mbaram.tracking import filter_step, transition_matrix
 
 __all__ = ["MBARAM"]
 
@@ -126,6 +127,8 @@ class MBARAM:
         self.prior = torch.zeros(0, dtype=self.dtype, device=self.device)
         self.graph = nx.DiGraph()
         self.prev_winner = -1
+        self._track: dict[tuple[str, ...], torch.Tensor] = {}
+        self._transition: torch.Tensor | None = None
 
     def __len__(self) -> int:
         return self._n
@@ -262,6 +265,12 @@ class MBARAM:
     ) -> MatchResult:
         """Node localisation (Section 2.1.3): the best node that passes vigilance; no learning.
 
+        With ``params.loc_track_hops > 0`` consecutive calls (per channel set) are
+        filtered (:mod:`torchratslam.mbaram.tracking`): the winner is the node of
+        highest belief that passes vigilance, the belief combining this frame's
+        ``log M_j`` with the previous belief moved along the map's edges;
+        :meth:`learn` and :meth:`reset_tracking` forget the belief.
+
         Args:
             inputs: channel -> vector. Shape: (D_k,) each.
             channels: the channels used, e.g. ``LASER_CHANNELS`` for localisation
@@ -271,7 +280,28 @@ class MBARAM:
             :class:`MatchResult` with ``node == -1`` when no node passes.
         """
         names = self._channel_names(channels)
-        return self._select(self._check(inputs, names), names)
+        x = self._check(inputs, names)
+        p = self.params
+        if p.loc_track_hops == 0 or self._n == 0:
+            return self._select(x, names)
+        log_m, passed = self._evaluate(x, names)
+        if self._transition is None:
+            self._transition = transition_matrix(
+                torch.as_tensor(list(self.graph.edges), dtype=torch.long).reshape(-1, 2),
+                self._n,
+                p.loc_track_hops,
+                dtype=self.dtype,
+                device=self.device,
+            )
+        belief = filter_step(self._track.get(names), log_m, self._transition, p.loc_track_jump)
+        self._track[names] = belief
+        return select(belief, passed)
+
+    def reset_tracking(self) -> None:
+        """Forget the node filter's belief (``loc_track_hops``): the next
+        :meth:`localise` starts from a uniform belief."""
+        self._track.clear()
+        self._transition = None
 
     def learn(self, inputs: Mapping[str, Any]) -> MatchResult:
         """One map-learning step (Algorithm 1): compete, vigilance, learn or add a node, link.
@@ -283,6 +313,8 @@ class MBARAM:
             The :class:`MatchResult` (the winner, or the new node with ``is_new``).
         """
         x = self._check(inputs, self.names)
+        self._track.clear()
+        self._transition = None
         if not self._ch:
             for k, v in x.items():
                 self._ch[k] = self._new_channel(k, v.numel())
@@ -292,7 +324,7 @@ class MBARAM:
             res = MatchResult(node, is_new=True, best=res.best)
         else:
             self._update(res.node, x)
-        self._link(self.prev_winner, res.node)
+        _link(self.graph, self.prev_winner, res.node)
         self.prev_winner = res.node
         return res
 
@@ -349,7 +381,7 @@ class MBARAM:
         x_, y_, th_ = self._position(j)
         self.graph.nodes[j].update(x=x_, y=y_, th=th_, count=int(n_j + 1))
         for u, v in (*self.graph.in_edges(j), *self.graph.out_edges(j)):
-            self._edge_geometry(u, v)
+            _edge_geometry(self.graph, u, v)
 
     def _position(self, j: int) -> tuple[float, float, float]:
         if self.position_channel is None:
@@ -357,26 +389,6 @@ class MBARAM:
         m = [*self._ch[self.position_channel].mean[j].tolist(), 0.0, 0.0, 0.0]
         s = self.params.odo_scale
         return m[0] / s, m[1] / s, m[2]
-
-    def _edge_geometry(self, u: int, v: int) -> None:
-        nu, nv = self.graph.nodes[u], self.graph.nodes[v]
-        dx, dy = nv["x"] - nu["x"], nv["y"] - nu["y"]
-        angle = math.atan2(dy, dx)
-        self.graph.edges[u, v].update(
-            d=math.hypot(dx, dy),
-            angle=angle,
-            heading=wrap_angle(angle - nu["th"]),
-            facing=wrap_angle(nv["th"] - nu["th"]),
-        )
-
-    def _link(self, prev: int, node: int) -> None:
-        if prev < 0 or prev == node:
-            return
-        if self.graph.has_edge(prev, node):
-            self.graph.edges[prev, node]["count"] += 1
-        else:
-            self.graph.add_edge(prev, node, count=1)
-        self._edge_geometry(prev, node)
 
     # ------------------------------------------------------------ save/load
     def get_state(self) -> dict[str, Any]:
@@ -443,5 +455,29 @@ class MBARAM:
             np.asarray(state["edges"]).tolist(), np.asarray(state["edge_counts"]).tolist()
         ):
             self.graph.add_edge(int(u), int(v), count=int(c))
-            self._edge_geometry(int(u), int(v))
+            _edge_geometry(self.graph, int(u), int(v))
         self.prev_winner = int(state["prev_winner"])
+
+
+def _edge_geometry(graph: nx.DiGraph, u: int, v: int) -> None:
+    """Store the edge's length, adjacent angle, heading and facing from its nodes' poses."""
+    nu, nv = graph.nodes[u], graph.nodes[v]
+    dx, dy = nv["x"] - nu["x"], nv["y"] - nu["y"]
+    angle = math.atan2(dy, dx)
+    graph.edges[u, v].update(
+        d=math.hypot(dx, dy),
+        angle=angle,
+        heading=wrap_angle(angle - nu["th"]),
+        facing=wrap_angle(nv["th"] - nu["th"]),
+    )
+
+
+def _link(graph: nx.DiGraph, prev: int, node: int) -> None:
+    """Add (or count again) the edge from the previous winner to this one."""
+    if prev < 0 or prev == node:
+        return
+    if graph.has_edge(prev, node):
+        graph.edges[prev, node]["count"] += 1
+    else:
+        graph.add_edge(prev, node, count=1)
+    _edge_geometry(graph, prev, node)

@@ -56,6 +56,21 @@ class MBARAMParams(Params):
     loc_threshold: float = param(
         1.0, "Eq. 16: success when node-to-robot distance < this (m)", gt=0.0
     )
+    loc_track_hops: int = param(
+        0,
+        "localisation over consecutive frames (the paper's Section 4 remedy, 'comparing "
+        "several time stamps'): a Bayes filter over the nodes in which the robot moves "
+        "at most this many edges between frames (0 = off, the paper's single-frame "
+        "localisation)",
+        ge=0,
+    )
+    loc_track_jump: float = param(
+        0.01,
+        "the node filter's probability of a jump to any node between two frames "
+        "(recovers from a wrong belief)",
+        gt=0.0,
+        le=1.0,
+    )
 
     def channel_weights(self) -> dict[str, float]:
         """The paper's three channels and their weights alpha_k."""

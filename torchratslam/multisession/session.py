@@ -35,15 +35,34 @@ from ratslam_graph.protocols import ExperienceMapModule
 from torchratslam.config import RatSLAMConfig
 from torchratslam.errors import ConfigError
 from torchratslam.maps.compat import conform
-from torchratslam.maps.merge import fuse_templates, merge_maps, pick_experience
+from torchratslam.maps.merge import (
+    append_place,
+    first_experience,
+    fuse_templates,
+    merge_maps,
+    pick_experience,
+)
 from torchratslam.maps.running import apply_state, state_from_slam
-from torchratslam.maps.state import MapState
+from torchratslam.maps.state import EM_ACCUM, PC_BEST, MapState
 from torchratslam.messages import SessionState
 from torchratslam.pipeline.ratslam import RatSLAM
 from torchratslam.pipeline.results import RunResult, StepResult
 from torchratslam.protocols import LocalViewModule, OdometrySource, PoseCellModule
 
-__all__ = ["MultiSessionRatSLAM"]
+__all__ = ["MERGE_ANCHORS", "MultiSessionRatSLAM"]
+
+MERGE_ANCHORS = ("template", "view")
+"""``MultiSessionRatSLAM(merge_anchor=...)``: where a merge joins the two maps.
+``"template"`` (default, the paper): the partial template that matched is identified with
+the stored one at once; ``"view"`` (a deviation): from that match on, every frame's view
+is compared with the stored template ``u``; while the error falls the merge waits, and
+when it rises (or after :data:`MAX_ANCHOR_FRAMES`, or when the partial map makes an
+experience) the maps are joined at the frame of the smallest error, whose view becomes
+the partial map's matching template (:func:`~torchratslam.maps.merge.append_place`).
+Templates are learnt a few frames apart, so the template that matched can lie up to half
+a template spacing from ``u``'s place; the view's best match lies within a frame."""
+MAX_ANCHOR_FRAMES = 30
+"""``merge_anchor="view"``: the merge waits at most this many frames for the best view."""
 
 log = logging.getLogger(__name__)
 
@@ -77,7 +96,12 @@ class MultiSessionRatSLAM:
             re-pointed at the stored matches' first experiences
             (:func:`~torchratslam.maps.merge.fuse_templates`). Without it a delayed
             merge keeps one copy of each such place. Default False; a deviation (the
-            paper merges at the first match, so there is nothing to absorb).
+            paper merges at the first match, so there is nothing to absorb). With
+            ``merge_anchor="view"`` only pairs the merge puts within half the stored
+            map's median link length of each other (the matched template included).
+        merge_anchor: where a merge joins the maps, see :data:`MERGE_ANCHORS`
+            (default ``"template"``, the paper); ``"view"`` waits while the view keeps
+            matching the stored template better (at most :data:`MAX_ANCHOR_FRAMES`).
         **ratslam_kwargs: passed to :class:`~torchratslam.pipeline.RatSLAM`
             (``local_view``, ``pose_cells``, ``experience_map``, ``odometry``, ``dtype``,
             ``device``).
@@ -92,7 +116,8 @@ class MultiSessionRatSLAM:
         merges: one dict per merge: ``frame``, ``map`` (index in ``stored``),
             ``map_name``, ``session``, ``scenario`` ("i": first view, "ii": a partial
             map), ``error``, ``loaded_template``, ``loaded_exp``, ``loaded_exp_t`` and
-            ``partial_exp_t`` (creation times of the two matched experiences), ``pc_shift``,
+            ``partial_exp_t`` (creation times of the two matched experiences; a first
+            view: its frame's time), ``pc_shift``,
             ``transform`` (dth, tx, ty), ``templates_added``, ``experiences_added``,
             ``partial_experiences`` (the partial map's experiences at the merge, the
             dropped ``e_z`` included),
@@ -118,8 +143,15 @@ class MultiSessionRatSLAM:
         merge_threshold: float | None = None,
         merge_persist: int = 1,
         merge_absorb: bool = False,
+        merge_anchor: str = "template",
         **ratslam_kwargs: Any,
     ) -> None:
+        if merge_anchor not in MERGE_ANCHORS:
+            raise ConfigError(f"merge_anchor must be one of {MERGE_ANCHORS}, got {merge_anchor!r}")
+        self.merge_anchor = merge_anchor
+        # merge_anchor="view": the match being followed (see _follow)
+        self._anchor: dict[str, Any] | None = None
+        self._image: Any = None
         if merge_threshold is not None and not merge_threshold > 0:
             raise ConfigError(f"merge_threshold must be > 0 (or None), got {merge_threshold!r}")
         if int(merge_persist) < 1:
@@ -206,18 +238,24 @@ class MultiSessionRatSLAM:
     # ------------------------------------------------------------------ stepping
     def step(self, image: Any, odometry: tuple[float, float, float] | None = None) -> StepResult:
         """Process one image with its odometry (see ``RatSLAM.step``), merging if due."""
+        self.keep_image(image)
         return self._after_step(self.slam.step(image, odometry))
 
     def step_frame(self, frame: Any) -> StepResult:
         """Process one :class:`~torchratslam.messages.Frame`, merging if due."""
+        self.keep_image(frame.image)
         return self._after_step(self.slam.step_frame(frame))
+
+    def keep_image(self, image: Any) -> None:
+        """Remember the image being processed (``merge_anchor="view"`` compares it)."""
+        self._image = image
 
     def run(
         self,
         frames: Iterable[Any] | Any,
         *,
         max_frames: int | None = None,
-        progress: bool = True,
+        progress: bool | str | None = None,
         callback: Callable[[StepResult], None] | None = None,
         **kwargs: Any,
     ) -> RunResult:
@@ -230,6 +268,9 @@ class MultiSessionRatSLAM:
             if callback is not None:
                 callback(r)
 
+        if self.merge_anchor == "view":
+            source: Any = frames
+            frames = _tap(source.frames() if hasattr(source, "frames") else source, self)
         return self.slam.run(
             frames,
             max_frames=max_frames,
@@ -261,6 +302,8 @@ class MultiSessionRatSLAM:
         return best
 
     def _after_step(self, result: StepResult) -> StepResult:
+        if self._anchor is not None:
+            return self._follow(result)
         if not self.pending or not result.view.is_new:
             return result
         template = self.slam.local_view.templates[int(result.view.template_id)]
@@ -282,7 +325,22 @@ class MultiSessionRatSLAM:
         self._streak = (-1, 0)
         absorb = [(p, t) for p, kk, t in self._seen if kk == k] if self.merge_absorb else []
         self._seen = []
+        if self.merge_anchor == "view":
+            self._anchor = {
+                "k": k,
+                "u": tid,
+                "absorb": [*absorb, (int(result.view.template_id), tid)]
+                if self.merge_absorb
+                else [],
+                "frames": 0,
+                "n_exp": self.slam.counts()[1],
+                "best": _place(self.slam, self._image, result.frame, err, offset),
+            }
+            return result
         self.merge_with(k, tid, offset=offset, error=err, frame=result.frame, absorb=absorb)
+        return self._merged(result)
+
+    def _merged(self, result: StepResult) -> StepResult:
         n_t, n_e, _ = self.slam.counts()
         return dataclasses.replace(
             result,
@@ -290,6 +348,30 @@ class MultiSessionRatSLAM:
             templates=n_t,
             experiences=n_e,
         )
+
+    def _follow(self, result: StepResult) -> StepResult:
+        """``merge_anchor="view"``: compare this frame's view with the matched stored
+        template; merge at the best frame once the error rises."""
+        a = self._anchor
+        assert a is not None
+        k, u = a["k"], a["u"]
+        view = _view_of(self.slam, self._image)
+        errs = self._banks[k].errors(view, [u])[0]
+        j = int(torch.argmin(errs))
+        err, offset = float(errs[j]), int(self._banks[k].offsets[j])
+        a["frames"] += 1
+        made_exp = self.slam.counts()[1] != a["n_exp"]
+        if err < a["best"]["error"] and not made_exp:
+            a["best"] = _place(self.slam, self._image, result.frame, err, offset)
+            if a["frames"] < MAX_ANCHOR_FRAMES:
+                return result
+        self._anchor = None
+        best = a["best"]
+        if made_exp:  # the partial map moved on: join the maps here
+            best = _place(self.slam, self._image, result.frame, err, offset)
+        kw = {key: best[key] for key in ("offset", "error", "frame")}
+        self.merge_with(k, u, absorb=a["absorb"], place=best, **kw)
+        return self._merged(result)
 
     def merge_with(
         self,
@@ -300,18 +382,25 @@ class MultiSessionRatSLAM:
         error: float = 0.0,
         frame: int | None = None,
         absorb: list[tuple[int, int]] | None = None,
+        place: dict[str, Any] | None = None,
     ) -> dict[str, Any]:
         """Merge stored map ``k`` (matched at ``loaded_template``) into the running map
         now, relax, and record the merge.
 
         ``absorb``: ``(partial template, stored template)`` pairs also identified
         (``merge_absorb``; :func:`~torchratslam.maps.merge.fuse_templates`).
+        ``place``: the view, frame, time, accumulators and packet at which the maps are
+        joined (``merge_anchor="view"``; :func:`~torchratslam.maps.merge.append_place`),
+        None: at the partial map's last template.
 
         Returns:
             The merge record appended to :attr:`merges`.
         """
         t0 = time.perf_counter()
         partial = state_from_slam(self.slam)
+        scenario = "i" if partial.n_templates <= 1 else "ii"
+        if place is not None:
+            partial = _with_place(partial, place)
         loaded = self.stored[k]
         rel = float(self._banks[k].relative_rad(offset))
         res = merge_maps(
@@ -327,6 +416,8 @@ class MultiSessionRatSLAM:
         if absorb:
             tmap = res.info["template_ids"]
             pairs = [(int(tmap[p]), int(t)) for p, t in absorb if 0 <= p < tmap.size]
+            if place is not None:
+                pairs = _near_pairs(state, pairs, loaded)
             state, fmap, absorbed = fuse_templates(state, pairs)
             exp_ids = fmap[np.asarray(exp_ids, np.int64)]
         apply_state(state, self.slam, exp_ids=exp_ids)
@@ -345,30 +436,18 @@ class MultiSessionRatSLAM:
                     "partial_state": partial,
                 }
             )
-        rec = {
-            "frame": int(self.slam.frame_index - 1 if frame is None else frame),
-            "map": int(k),
-            "map_name": self.names[k],
-            "session": self.session_name,
-            "scenario": "i" if partial.n_templates <= 1 else "ii",
-            "error": float(error),
-            "loaded_template": int(loaded_template),
-            "loaded_exp": int(res.info["loaded_exp"]),
-            "loaded_exp_t": float(loaded.exp_t[int(res.info["loaded_exp"])]),
-            "partial_exp_t": (
-                float(partial.exp_t[int(res.info["partial_exp"])])
-                if int(res.info["partial_exp"]) >= 0
-                else float("nan")
-            ),
-            "pc_shift": res.info["pc_shift"],
-            "pc_shift_applied": res.info["pc_shift_applied"],
-            "transform": [float(v) for v in res.info["transform"]],
-            "templates_added": state.n_templates - loaded.n_templates,
-            "experiences_added": state.n_experiences - loaded.n_experiences,
-            "partial_experiences": int(partial.n_experiences),
-            "absorbed": [list(p) for p in absorbed],
-            "time_s": time.perf_counter() - t0,
-        }
+        rec = _merge_record(res.info, loaded, partial, state, absorbed)
+        if not np.isfinite(rec["partial_exp_t"]):  # a first view: the robot is where it is
+            rec["partial_exp_t"] = float(self.slam.session.last_t)
+        rec.update(
+            frame=int(self.slam.frame_index - 1 if frame is None else frame),
+            map=int(k),
+            map_name=self.names[k],
+            session=self.session_name,
+            scenario=scenario,
+            error=float(error),
+            time_s=time.perf_counter() - t0,
+        )
         self.merges.append(rec)
         log.info(
             "frame %d: merged stored map %r (template %d matched, error %.4g) into the "
@@ -389,3 +468,88 @@ class MultiSessionRatSLAM:
     def unmerged(self) -> list[MapState]:
         """The stored maps that were not merged (still separate)."""
         return [self.stored[k] for k in self.pending]
+
+
+def _near_pairs(
+    state: MapState, pairs: list[tuple[int, int]], loaded: MapState
+) -> list[tuple[int, int]]:
+    """The ``(template, stored template)`` pairs whose first experiences the merge put
+    within half the stored map's median link length of each other."""
+    if loaded.n_links == 0:
+        return []
+    radius = 0.5 * float(np.median(loaded.link_d))
+    out = []
+    for p, t in pairs:
+        a, b = first_experience(state, p), first_experience(state, t)
+        if (
+            a >= 0
+            and b >= 0
+            and np.hypot(*(state.exp_pose[a, :2] - state.exp_pose[b, :2])) <= radius
+        ):
+            out.append((p, t))
+    return out
+
+
+def _merge_record(
+    info: dict[str, Any],
+    loaded: MapState,
+    partial: MapState,
+    state: MapState,
+    absorbed: list[tuple[int, int]],
+) -> dict[str, Any]:
+    """What a merge did (the fields of :attr:`MultiSessionRatSLAM.merges` that come from
+    the maps)."""
+    e_u, e_z = int(info["loaded_exp"]), int(info["partial_exp"])
+    return {
+        "loaded_template": int(info["loaded_template"]),
+        "loaded_exp": e_u,
+        "loaded_exp_t": float(loaded.exp_t[e_u]),
+        "partial_exp_t": float(partial.exp_t[e_z]) if e_z >= 0 else float("nan"),
+        "pc_shift": info["pc_shift"],
+        "pc_shift_applied": info["pc_shift_applied"],
+        "transform": [float(v) for v in info["transform"]],
+        "templates_added": state.n_templates - loaded.n_templates,
+        "experiences_added": state.n_experiences - loaded.n_experiences,
+        "partial_experiences": int(partial.n_experiences),
+        "absorbed": [list(p) for p in absorbed],
+    }
+
+
+def _tap(frames: Iterable[Any], ms: MultiSessionRatSLAM) -> Iterable[Any]:
+    """The frames, each image kept on ``ms`` as it passes (``merge_anchor="view"``)."""
+    for f in frames:
+        ms.keep_image(getattr(f, "image", None))
+        yield f
+
+
+def _view_of(slam: RatSLAM, image: Any) -> torch.Tensor:
+    """``image`` as the local view's template."""
+    lv: Any = slam.local_view  # a template local view: it has ``preprocess``
+    return lv.preprocess(image)
+
+
+def _place(slam: RatSLAM, image: Any, frame: int, err: float, offset: int) -> dict[str, Any]:
+    """This frame as the place to join the maps at (``merge_anchor="view"``): the view,
+    its match with the stored template, and the accumulators and packet now."""
+    state = state_from_slam(slam)
+    return {
+        "error": float(err),
+        "offset": int(offset),
+        "frame": int(frame),
+        "t": float(slam.session.last_t),
+        "view": _view_of(slam, image).detach().cpu().numpy(),
+        "accum": np.asarray(state.extra[EM_ACCUM], np.float64).copy(),
+        "pc": np.asarray(state.extra[PC_BEST], np.float64).copy(),
+    }
+
+
+def _with_place(partial: MapState, place: dict[str, Any]) -> MapState:
+    """The partial map with the place of :func:`_place` appended."""
+    return append_place(
+        partial,
+        place["view"],
+        at_accum=place["accum"],
+        at_pc=place["pc"],
+        frame=place["frame"],
+        t=place["t"],
+    )

@@ -11,12 +11,23 @@
   160x96 forward camera (75 degrees), 10 Hz, 0.2 m/s. session1-4: one CCW lap around
   each block (194 each); session5: in along an unmapped spur, then the outer loop,
   which joins all four (433).
+* ``new_college`` (Fig. 8): a campus of two quads joined by a lane, buildings round
+  and between them; 256x64 panoramic, 1 Hz, 0.5 m/s, wheel odometry. session1: two
+  clockwise laps of the west quad (301); session2: two clockwise laps of the east quad
+  (301); session3: from a known place on the west quad, along its north side and the
+  north lane, a clockwise lap of the east quad (271), merging with both stored maps.
 * ``loop``: a corridor loop (38.3 m lap), 256x64 panoramic, 5 Hz, lasers on.
   session1: 6 laps, 1781 frames.
 * ``suburb`` (St Lucia-like): an 8 x 8 block street grid (40 m blocks, 12 m streets,
   buildings of varied heights and facades); a car with a 128x64 forward camera
   (60 degrees, 1.5 m up) at 10 m/s, 10 Hz; 20000 frames driving most streets several
   times in both directions.
+* ``bicocca_like`` (MBARAM, Rawseeds Bicocca stand-in): two 30 x 20 m buildings, each a
+  3 m ring corridor round a core, joined by a 10 m passage; a 197 m figure-of-eight lap at
+  1 m/s, 5 Hz, front and rear lasers on.
+* ``bovisa_like`` (MBARAM, Rawseeds Bovisa stand-in): a 120 x 80 m campus of six buildings
+  behind a low fence; a 428 m lap round the ring road and down the middle road at
+  1.5 m/s, 5 Hz, front and rear lasers on.
 """
 
 from __future__ import annotations
@@ -39,7 +50,16 @@ from torchratslam.sim.tour_spec import (
     WorldSpec,
 )
 
-__all__ = ["IRAT_LIKE", "LAB_TOUR", "LOOP", "SUBURB", "TOUR_SPECS", "VIRTUAL_TOUR"]
+__all__ = [
+    "BICOCCA_LIKE",
+    "BOVISA_LIKE",
+    "IRAT_LIKE",
+    "LAB_TOUR",
+    "LOOP",
+    "SUBURB",
+    "TOUR_SPECS",
+    "VIRTUAL_TOUR",
+]
 
 # smooth textures (the paper's virtual world has smooth imagery): turning by one template
 # column (2.8 degrees) changes a view far less than vt_match_threshold, so the published
@@ -262,6 +282,97 @@ IRAT_LIKE = TourSpec(
     ),
 )
 
+# new_college: the west quad (session 1) and the east quad (session 2) are laps round a
+# building each, 24 x 16 m, 12 m apart; a lane along their south sides joins them.
+# Smooth textures and 0.5 m between frames: the 60 x 10 panoramic templates of Table 1
+# then recognise a place from the next lap (with sharp textures every frame is new).
+# Every session drives clockwise: a place seen the other way round differs by more than
+# vt_match_threshold (0.09 at the best turn, 0.2 m apart), so it would never merge
+_WEST = ((0.0, 0.0), (0.0, 16.0), (24.0, 16.0), (24.0, 0.0))  # clockwise
+_EAST = ((36.0, 0.0), (36.0, 16.0), (60.0, 16.0), (60.0, 0.0))  # clockwise
+NEW_COLLEGE = TourSpec(
+    name="new_college",
+    description=(
+        "multisession Fig. 8: two quads mapped in two sessions, a third session from a "
+        "known place in the first joins both"
+    ),
+    options={"speed": 0.5, "hz": 1.0},
+    positive=(("speed", 0.0), ("hz", 0.0)),
+    world=WorldSpec(
+        walls=(
+            Polyline(((-7, -7), (67, -7), (67, 23), (-7, 23))),  # the college's outer ranges
+            Box(12.0, 8.0, 16.0, 8.0, height=8.0),  # the west quad's hall
+            Box(48.0, 8.0, 16.0, 8.0, height=10.0),  # the east quad's chapel
+            Box(30.0, 8.0, 4.0, 10.0, height=6.0),  # the range between the quads
+            Box(-3.5, 5.0, 1.0, 1.0, height=3.0),  # trees and lamp posts
+            Box(12.0, -3.5, 1.2, 1.2, height=3.0),
+            Box(30.0, -3.5, 1.0, 1.0, height=3.0),
+            Box(48.0, 19.5, 1.2, 1.2, height=3.0),
+            Box(63.5, 9.0, 1.0, 1.5, height=3.0),
+            Box(-3.5, 14.0, 1.5, 1.0, height=3.0),
+            Box(20.0, 19.5, 1.0, 1.0, height=3.0),
+            Box(42.0, -3.5, 1.5, 1.0, height=3.0),
+        ),
+        wall_height=12.0,
+        style="smooth",
+        floor=0.4,
+        ceiling=0.9,
+    ),
+    routes={
+        "west": PolygonRoute(_WEST, radius=3.0),
+        "east": PolygonRoute(_EAST, radius=3.0),
+        # session 3: north up the west quad's west side, east along the north sides and
+        # the north lane, then clockwise round the east quad and along its north side
+        "session3": PolygonRoute(
+            (
+                (0.0, 8.0),
+                (0.0, 16.0),
+                (60.0, 16.0),
+                (60.0, 0.0),
+                (36.0, 0.0),
+                (36.0, 16.0),
+                (48.0, 16.0),
+            ),
+            radius=3.0,
+            closed=False,
+        ),
+    },
+    # both stored sessions start on their quad's south side, heading west
+    sessions=(
+        SessionSpec("session1", "west", laps=2.0, start=(20.0, 0.0)),
+        SessionSpec("session2", "east", laps=2.0, start=(48.0, 0.0)),
+        SessionSpec("session3", "session3", count="floor"),
+    ),
+    spacing=Spacing("speed"),
+    camera=CameraSpec("panoramic", width=256, height=64, cam_height=1.0),
+    noise=NoiseSpec(
+        scale_error=0.02,
+        rot_scale_error=0.01,
+        heading_bias=0.001,
+        trans_noise=0.02,
+        rot_noise=0.01,
+    ),
+    lasers=False,
+    main_route="west",
+    obstacle_size=1.0,
+    obstacle_offset=2.5,
+    pedestrian_offset=1.5,
+    clearance=1.5,
+    # continuous run: east along the west quad's south side and the south lane to
+    # session 2's start; then west along the south sides and the lane, and round the west
+    # quad's south-west corner to session 3's start
+    bridge_routes={
+        "lane_east": PolygonRoute(((24.0, 0.0), (36.0, 0.0)), radius=3.0, closed=False),
+        "lane_west": PolygonRoute(((36.0, 0.0), (24.0, 0.0)), radius=3.0, closed=False),
+        "west_ccw": PolygonRoute(tuple(reversed(_WEST)), radius=3.0),
+        "east_ccw": PolygonRoute(tuple(reversed(_EAST)), radius=3.0),
+    },
+    bridges=(
+        (Leg("west_ccw", None, (24.0, 0.0)), Leg("lane_east"), Leg("east_ccw", (36.0, 0.0), None)),
+        (Leg("east", None, (36.0, 0.0)), Leg("lane_west"), Leg("west", (24.0, 0.0), None)),
+    ),
+)
+
 LOOP = TourSpec(
     name="loop",
     description="single-session corridor loop (the classic loop-closure test), lasers on",
@@ -350,7 +461,169 @@ SUBURB = TourSpec(
     clearance=Opt("street_width", div=2.0, add=-0.5),
 )
 
+# Rawseeds stand-ins for MBARAM (laser channels front and rear, odometry). The indoor one
+# is two buildings, each a 3 m ring corridor round a core, joined by a 10 m passage
+# (Bicocca-like); the outdoor one a 120 x 80 m campus of six buildings with 8-16 m roads
+# between them and a low fence round it (Bovisa-like).
+_BICOCCA_CABINETS = (
+    Box(8.0, 0.25, 1.6, 0.5, height=1.8),
+    Box(19.0, 0.25, 0.6, 0.5, height=1.8),
+    Box(29.75, 4.5, 0.5, 1.2, height=1.8),
+    Box(12.0, 19.75, 2.0, 0.5, height=1.8),
+    Box(0.25, 12.0, 0.5, 1.8, height=1.8),
+    Box(35.0, 8.75, 1.0, 0.5, height=1.8),
+    Box(48.0, 0.25, 0.8, 0.5, height=1.8),
+    Box(60.0, 0.25, 2.0, 0.5, height=1.8),
+    Box(69.75, 7.0, 0.5, 1.0, height=1.8),
+    Box(66.0, 19.75, 1.2, 0.5, height=1.8),
+    Box(50.0, 19.75, 0.6, 0.5, height=1.8),
+    Box(40.25, 15.0, 0.5, 1.4, height=1.8),
+    Box(25.0, 2.75, 1.0, 0.5, height=1.8),
+    Box(47.0, 17.25, 1.5, 0.5, height=1.8),
+)
+
+BICOCCA_LIKE = TourSpec(
+    name="bicocca_like",
+    description="Rawseeds indoor stand-in: two ring corridors joined by a passage, lasers on",
+    options={"speed": 1.0, "hz": 5.0},
+    positive=(("speed", 0.0), ("hz", 0.0)),
+    world=WorldSpec(
+        walls=(
+            Polyline(
+                (
+                    (0, 0),
+                    (30, 0),
+                    (30, 8.5),
+                    (40, 8.5),
+                    (40, 0),
+                    (70, 0),
+                    (70, 20),
+                    (40, 20),
+                    (40, 11.5),
+                    (30, 11.5),
+                    (30, 20),
+                    (0, 20),
+                )
+            ),
+            Box(15.0, 10.0, 24.0, 14.0),
+            Box(55.0, 10.0, 24.0, 14.0),
+            *_BICOCCA_CABINETS,
+        ),
+        wall_height=2.5,
+    ),
+    # a figure of eight: A's lower half, the passage, all of B, the passage back, A's upper half
+    routes={
+        "tour": PolygonRoute(
+            (
+                (1.5, 1.5),
+                (28.5, 1.5),
+                (28.5, 10.0),
+                (41.5, 10.0),
+                (41.5, 1.5),
+                (68.5, 1.5),
+                (68.5, 18.5),
+                (41.5, 18.5),
+                (41.5, 10.0),
+                (28.5, 10.0),
+                (28.5, 18.5),
+                (1.5, 18.5),
+            ),
+            radius=1.0,
+        )
+    },
+    sessions=(SessionSpec("session1", "tour"),),
+    spacing=Spacing("speed"),
+    camera=CameraSpec("panoramic", width=256, height=64, cam_height=1.0),
+    noise=NoiseSpec(
+        scale_error=0.02,
+        rot_scale_error=0.008,
+        heading_bias=0.001,
+        trans_noise=0.02,
+        rot_noise=0.02,
+    ),
+    lasers=True,
+    main_route="tour",
+    obstacle_size=0.5,
+    obstacle_offset=0.8,
+    pedestrian_offset=0.7,
+    obstacle_height=1.2,
+    clearance=0.6,
+)
+
+BOVISA_LIKE = TourSpec(
+    name="bovisa_like",
+    description="Rawseeds outdoor stand-in: a campus of six buildings, lasers on",
+    options={"speed": 1.5, "hz": 5.0},
+    positive=(("speed", 0.0), ("hz", 0.0)),
+    world=WorldSpec(
+        walls=(
+            Polyline(((0, 0), (120, 0), (120, 80), (0, 80)), height=1.5),
+            Box(20.0, 20.0, 24.0, 16.0, height=12.0),
+            Box(60.0, 18.0, 30.0, 14.0, height=9.0),
+            Box(100.0, 22.0, 20.0, 20.0, height=15.0),
+            Box(22.0, 58.0, 26.0, 18.0, height=10.0),
+            Box(62.0, 60.0, 24.0, 22.0, height=8.0),
+            Box(100.0, 60.0, 22.0, 18.0, height=12.0),
+            # parked cars, kiosks and bins beside the roads
+            Box(30.0, 1.5, 4.5, 2.0, height=1.5),
+            Box(70.0, 1.5, 4.5, 2.0, height=1.5),
+            Box(118.5, 40.0, 2.0, 4.5, height=1.5),
+            Box(46.0, 36.0, 2.0, 2.0, height=2.5),
+            Box(76.0, 44.0, 4.5, 2.0, height=1.5),
+            Box(36.0, 60.0, 1.0, 1.0, height=1.0),
+            Box(20.0, 78.5, 4.5, 2.0, height=1.5),
+            Box(95.0, 78.5, 4.5, 2.0, height=1.5),
+        ),
+        wall_height=8.0,
+        floor=0.4,
+        ceiling=0.9,
+    ),
+    # the campus ring road with a detour down the middle road between the buildings
+    routes={
+        "tour": PolygonRoute(
+            (
+                (4.0, 5.0),
+                (116.0, 5.0),
+                (116.0, 76.0),
+                (82.0, 76.0),
+                (82.0, 40.0),
+                (40.0, 40.0),
+                (40.0, 76.0),
+                (4.0, 76.0),
+            ),
+            radius=3.0,
+        )
+    },
+    sessions=(SessionSpec("session1", "tour"),),
+    spacing=Spacing("speed"),
+    camera=CameraSpec("forward", width=128, height=64, fov_deg=60.0, cam_height=1.5),
+    noise=NoiseSpec(
+        scale_error=0.02,
+        rot_scale_error=0.01,
+        heading_bias=0.001,
+        trans_noise=0.05,
+        rot_noise=0.01,
+    ),
+    lasers=True,
+    main_route="tour",
+    obstacle_size=1.5,
+    obstacle_offset=3.0,
+    pedestrian_offset=1.5,
+    obstacle_height=1.5,
+    clearance=1.0,
+)
+
 #: Every tour by name.
 TOUR_SPECS: dict[str, TourSpec] = {
-    t.name: t for t in (VIRTUAL_TOUR, LAB_TOUR, IRAT_LIKE, LOOP, SUBURB)
+    t.name: t
+    for t in (
+        VIRTUAL_TOUR,
+        LAB_TOUR,
+        IRAT_LIKE,
+        NEW_COLLEGE,
+        LOOP,
+        SUBURB,
+        BICOCCA_LIKE,
+        BOVISA_LIKE,
+    )
 }

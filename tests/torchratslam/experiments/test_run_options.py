@@ -22,7 +22,7 @@ def test_options_round_trip_through_the_record():
     )
     text = json.dumps(RunRecord(opts, {"k": 1}).to_json(), indent=1, default=json_default)
     record = json.loads(text)
-    assert list(record) == ["format", "version", "options", "config_flat"]
+    assert list(record) == ["format", "version", "run_id", "finished", "options", "config_flat"]
     assert list(record["options"]) == [f.name for f in fields(RunOptions)]
     assert record["options"]["load"] == ["/a/state", "/b/state"]
     assert RunOptions.from_record(record["options"]) == opts

@@ -463,3 +463,44 @@ def test_cli_writes_metrics_and_figures(tmp_path):
     for name in ("map.png", "nodes_per_lap.png", "localisation.png", "state.npz"):
         assert (out / name).stat().st_size > 0
     assert main(["mbaram", "--data", "sim:loop", "--out", str(out), "--set", "s_max=-1"]) == 2
+
+
+def _chain(hops: int, jump: float = 0.01) -> MBARAM:
+    """Five nodes 10 units apart on a line, linked 0 -> 1 -> ... -> 4, tracking on."""
+    built = MBARAM(MBARAMParams(s_max=1e-3), channels={"a": 1.0})
+    for i in range(5):
+        assert built.learn({"a": torch.tensor([10.0 * i, 0.0])}).is_new
+    p = MBARAMParams(s_max=1e-3, vigilance="current", loc_track_hops=hops, loc_track_jump=jump)
+    m = MBARAM(p, channels={"a": 1.0})
+    m.set_state(built.get_state())
+    return m
+
+
+@pytest.mark.parametrize(("hops", "jump"), [(1, 0.01), (2, 0.3)])
+def test_tracking_is_a_bayes_filter_over_the_maps_edges(hops, jump):
+    m = _chain(hops, jump)
+    n = 5
+    # brute force: transition uniform over the nodes within `hops` edges (networkx)
+    und = m.graph.to_undirected()
+    t = np.zeros((n, n))
+    for i in range(n):
+        near = nx.single_source_shortest_path_length(und, i, cutoff=hops)
+        for j in near:
+            t[i, j] = 1.0 / len(near)
+    belief = None
+    for xv in (0.0, 9.0, 21.0, 40.0, 32.0, 5.0):
+        x = {"a": torch.tensor([xv, 0.0])}
+        log_m = m.scores(x).numpy()
+        if belief is None:
+            prior = np.full(n, 1.0 / n)
+        else:
+            prior = (1 - jump) * belief @ t + jump / n
+        belief = np.exp(log_m) * prior
+        belief /= belief.sum()
+        got = m.localise(x)
+        assert got.node == int(np.argmax(belief))  # every node passes "current" vigilance
+        assert got.log_m == pytest.approx(math.log(belief.max()), rel=1e-9, abs=1e-9)
+    # learning forgets the belief: the next frame starts from a uniform prior
+    m.learn({"a": torch.tensor([0.0, 0.0])})
+    far = {"a": torch.tensor([40.0, 0.0])}
+    assert m.localise(far).node == 4

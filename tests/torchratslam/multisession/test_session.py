@@ -11,6 +11,7 @@ import pytest
 import torch
 
 from torchratslam.config import load_config
+from torchratslam.errors import ConfigError
 from torchratslam.experiments.multisession_seeds import (
     RECOMMENDED_MERGE_OPTIONS,
     RECOMMENDED_SESSION_OPTIONS,
@@ -221,3 +222,46 @@ def test_two_stored_maps_are_merged_one_after_the_other(tour):
     # every template of both halves is kept, in the merged map's order: second, first, new
     assert st.n_templates >= halves[0].n_templates + halves[1].n_templates
     assert np.array_equal(st.templates[: halves[1].n_templates], halves[1].templates)
+
+
+def _joined_distance(tour, merge):
+    """Ground-truth distance (m) between the two experiences a merge joined (1 Hz: a
+    session's time is its frame index)."""
+    s1, s2 = tour.sessions
+    a = s1.poses[round(merge["loaded_exp_t"]), :2]
+    b = s2.poses[round(merge["partial_exp_t"]), :2]
+    return float(np.linalg.norm(a - b))
+
+
+def test_the_view_anchor_joins_the_maps_where_the_view_matches_best():
+    # seed 26: session 2's second matching template is learnt 3 frames before the stored
+    # template it matches (the templates of the two sessions are learnt out of step), so
+    # the merge at the template joins places 1.2 m apart; following the view to its best
+    # match joins them within one frame (0.4 m)
+    tour = get_tour("virtual_tour", seed=26)
+    slam = RatSLAM(CONFIG)
+    slam.run(tour.sessions[0].frames(), progress=False)
+    stored = state_from_slam(slam)
+    kw = {"merge_options": RECOMMENDED_MERGE_OPTIONS, **RECOMMENDED_SESSION_OPTIONS}
+    at_template, _ = run_session2(tour, stored, 40, **kw)
+    at_view, _ = run_session2(tour, stored, 40, merge_anchor="view", **kw)
+    (mt,), (mv,) = at_template.merges, at_view.merges
+    assert _joined_distance(tour, mt) > 1.0
+    assert _joined_distance(tour, mv) <= 0.5
+    # the merge waited for the view's best match, which is better than the template's
+    assert mv["frame"] > mt["frame"] and mv["error"] < mt["error"]
+    # the view the maps were joined at became the stored template: no template added
+    # for it, and the merged map is one connected map
+    partial = at_view.snapshots[0]["partial_state"]
+    merged = at_view.snapshots[0]["merged_state"]
+    assert merged.n_templates == stored.n_templates + partial.n_templates - 1 - len(mv["absorbed"])
+    # the appended place: the last template and experience, linked from the one before
+    assert partial.exp_template[-1] == partial.n_templates - 1
+    assert partial.link_to[-1] == partial.n_experiences - 1
+    assert partial.link_from[-1] == partial.n_experiences - 2
+    assert nx.is_weakly_connected(at_view.experience_map.graph)
+
+
+def test_an_unknown_merge_anchor_is_refused(session1_map):
+    with pytest.raises(ConfigError, match="merge_anchor"):
+        MultiSessionRatSLAM(CONFIG, [session1_map], merge_anchor="nearest")

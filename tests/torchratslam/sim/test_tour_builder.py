@@ -16,6 +16,9 @@ SMALL = {
     "irat_like": {"speed": 0.8},
     "loop": {"laps": 1.0, "frames": 120},
     "suburb": {"blocks": 2, "frames": 200},
+    "bicocca_like": {"hz": 1.0},
+    "bovisa_like": {"hz": 0.5},
+    "new_college": {"speed": 2.0},
 }
 
 
