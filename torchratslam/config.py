@@ -366,8 +366,14 @@ def profile_values(name: Any, source: str = "config") -> dict[str, Any]:
     """The keys a behaviour profile sets (a copy of ``PROFILES[name]``).
 
     Raises:
-        ConfigError: an unknown profile name (with the nearest valid one).
+        ConfigError: an unknown profile name (with the nearest valid one) or a value that
+            is not a name.
     """
+    if not isinstance(name, str):
+        raise ConfigError(
+            f"{source}: behaviour must be a profile name ({' or '.join(PROFILES)}), "
+            f"got {type(name).__name__} {name!r:.60}"
+        )
     if name not in PROFILES:
         raise ConfigError(
             f"{source}: " + unknown_name_message("behaviour profile", str(name), PROFILES)
@@ -384,9 +390,35 @@ def _read_text(path: Path) -> str:
         raise InputError(f"{path}: cannot be read ({exc.strerror or exc})") from None
 
 
+class _DuplicateKey(yaml.YAMLError):
+    """A mapping names one key twice (the message says which, on which lines)."""
+
+
+class _UniqueKeyLoader(yaml.SafeLoader):
+    """YAML's safe loader, refusing a mapping that names one key twice (plain YAML
+    keeps the last value silently)."""
+
+    def construct_mapping(self, node: yaml.MappingNode, deep: bool = False) -> dict[Any, Any]:
+        seen: dict[Any, int] = {}
+        for key_node, _ in node.value:
+            key = self.construct_object(key_node, deep=deep)
+            try:
+                first = seen.setdefault(key, key_node.start_mark.line + 1)
+            except TypeError:
+                continue  # an unhashable key: construct_mapping below names it
+            if first != key_node.start_mark.line + 1:
+                raise _DuplicateKey(
+                    f"key {key!r:.60} appears twice (lines {first} and "
+                    f"{key_node.start_mark.line + 1}); keep one"
+                )
+        return super().construct_mapping(node, deep=deep)
+
+
 def _read_yaml(path: Path) -> dict[str, Any]:
     try:
-        data = yaml.safe_load(_read_text(path))
+        data = yaml.load(_read_text(path), Loader=_UniqueKeyLoader)  # a SafeLoader
+    except _DuplicateKey as exc:
+        raise ConfigError(f"{path}: {exc}") from None
     except (yaml.YAMLError, RecursionError) as exc:
         one_line = " ".join(str(exc).split())
         raise ConfigError(f"{path}: not valid YAML ({one_line})") from None
@@ -428,14 +460,17 @@ def _read_openratslam_txt(path: Path) -> dict[str, Any]:
     return flat
 
 
-def load_config(path: str | Path | None = None, **overrides: Any) -> RatSLAMConfig:
+def load_config(
+    path: str | Path | Mapping[str, Any] | None = None, **overrides: Any
+) -> RatSLAMConfig:
     """Load a configuration.
 
     Args:
         path: a YAML file (``.yaml``/``.yml``), an OpenRatSLAM ``.txt`` config, the name
             of a shipped preset (``configs/`` in the repository, ``torchratslam/presets/``
-            when installed) without extension (e.g. ``"virtual_tour"``), or
-            None for OpenRatSLAM's defaults.
+            when installed) without extension (e.g. ``"virtual_tour"``), a dict of flat
+            keys (as in a YAML file, e.g. ``{"pc_dim_xy": 15}``), or None for
+            OpenRatSLAM's defaults.
         **overrides: flat keys that replace values from the file.
 
     Returns:
@@ -448,6 +483,19 @@ def load_config(path: str | Path | None = None, **overrides: Any) -> RatSLAMConf
     """
     if path is None:
         return RatSLAMConfig.from_flat(overrides, source="overrides")
+    if isinstance(path, Mapping):
+        bad = next((k for k in path if not isinstance(k, str)), None)
+        if bad is not None:
+            raise ConfigError(
+                f"config dict: key {bad!r} ({type(bad).__name__}) is not a parameter name; "
+                "keys are names such as pc_dim_xy"
+            )
+        return RatSLAMConfig.from_flat({**path, **overrides}, source="config dict")
+    if not isinstance(path, (str, Path)):
+        raise ConfigError(
+            f"load_config takes a file path, a preset name, a dict of flat keys or None; "
+            f"got {type(path).__name__}"
+        )
     p = Path(path)
     if not p.exists() and not p.suffix and (CONFIG_DIR / f"{p.name}.yaml").exists():
         p = CONFIG_DIR / f"{p.name}.yaml"

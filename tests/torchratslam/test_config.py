@@ -230,3 +230,36 @@ def test_an_openratslam_txt_config_gets_the_openratslam_behaviour(tmp_path: Path
     cfg = load_config(p)
     assert cfg.general.behaviour == "openratslam"
     assert _switches(cfg) == PROFILES["openratslam"] and cfg.experience_map.exp_loops == 20
+
+
+@pytest.mark.parametrize("value", ["[]", "{a: 1}", "7", "null"])
+def test_a_behaviour_that_is_not_a_name_is_one_config_error(tmp_path: Path, value):
+    p = tmp_path / "c.yaml"
+    p.write_text(f"behaviour: {value}\n")
+    with pytest.raises(ConfigError, match=r"c\.yaml: behaviour must be a profile name") as e:
+        load_config(p)
+    assert "\n" not in str(e.value)
+
+
+def test_a_dict_of_flat_keys_is_a_config(tmp_path: Path):
+    cfg = load_config({"pc_dim_xy": 15, "exp_loops": 3}, vt_match_threshold=0.2)
+    p = tmp_path / "same.yaml"
+    p.write_text("pc_dim_xy: 15\nexp_loops: 3\nvt_match_threshold: 0.2\n")
+    assert cfg == load_config(p)
+    assert cfg.pose_cells.pc_dim_xy == 15 and cfg.experience_map.exp_loops == 3
+    with pytest.raises(ConfigError, match=r"config dict: unknown parameter 'pc_dim_yx'"):
+        load_config({"pc_dim_yx": 15})
+    with pytest.raises(ConfigError, match=r"config dict: key 3 \(int\) is not a parameter"):
+        load_config({3: 15})
+    with pytest.raises(ConfigError, match=r"a dict of flat keys or None; got list"):
+        load_config([("pc_dim_xy", 15)])  # type: ignore[arg-type]
+
+
+def test_a_key_given_twice_in_a_yaml_file_is_refused(tmp_path: Path):
+    p = tmp_path / "twice.yaml"
+    p.write_text("pc_dim_xy: 15\nexp_loops: 3\npc_dim_xy: 21\n")
+    with pytest.raises(ConfigError) as e:
+        load_config(p)
+    assert str(e.value) == f"{p}: key 'pc_dim_xy' appears twice (lines 1 and 3); keep one"
+    p.write_text("pc_dim_xy: 15\nexp_loops: 3\n")  # each key once: loads
+    assert load_config(p).pose_cells.pc_dim_xy == 15

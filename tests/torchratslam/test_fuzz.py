@@ -8,9 +8,12 @@ exception, and never a large allocation (the peak of numpy/Python allocations tr
 ``tracemalloc`` stays under 64 MB, so an input that declares a huge size is refused
 before anything is allocated).
 
-``make test`` runs the ``fuzz-quick`` profile (a fixed, derandomised set of examples per
-parser); ``make fuzz`` sets ``TORCHRATSLAM_FUZZ_PROFILE=fuzz`` (5000 random examples per
-parser).
+``make test`` replays the corpus (``tests/data/fuzz_corpus/``: every input that ever
+failed, one file each, kept so it never fails again) and runs the ``fuzz-quick`` profile
+(150 new random examples per parser, different on every run); ``make fuzz`` sets
+``TORCHRATSLAM_FUZZ_PROFILE=fuzz`` (5000 random examples per parser). A NumPy warning
+is a failure (an input must be refused, not computed on with NaNs). A failing example
+is printed by hypothesis; add it to the corpus.
 """
 
 from __future__ import annotations
@@ -46,12 +49,15 @@ _COMMON = {
     "suppress_health_check": list(HealthCheck),
     "database": None,
 }
-settings.register_profile("fuzz-quick", max_examples=300, derandomize=True, **_COMMON)
+settings.register_profile("fuzz-quick", max_examples=150, **_COMMON)
 settings.register_profile("fuzz", max_examples=5000, **_COMMON)
 FUZZ = settings.get_profile(os.environ.get("TORCHRATSLAM_FUZZ_PROFILE", "fuzz-quick"))
 PEAK_BYTES = 64 << 20
 
 WORK = Path(tempfile.mkdtemp(prefix="torchratslam-fuzz-"))
+CORPUS = Path(__file__).resolve().parents[1] / "data" / "fuzz_corpus"
+
+pytestmark = pytest.mark.filterwarnings("error::RuntimeWarning")
 
 
 @pytest.fixture(scope="module", autouse=True)
@@ -368,3 +374,33 @@ def test_the_fuzzers_reach_valid_inputs_too():
     (n / "state.json").write_text(meta_text)
     (n / "state.npz").write_bytes(npz)
     assert check(load_map, n).equals(random_map())
+
+
+# ----------------------------------------------------------------------- the corpus
+def _corpus_parsers():
+    return {
+        "yaml": [load_config],
+        "txt": [load_config],
+        "posegraph": [
+            lambda p: read_posegraph(p, initial="file"),
+            lambda p: read_posegraph(p, initial="odometry"),
+        ],
+        "odometry": [read_odometry_csv],
+        "groundtruth": [read_groundtruth_csv],
+    }
+
+
+CORPUS_FILES = sorted(p for p in CORPUS.rglob("*") if p.is_file() and p.name != "README.md")
+
+
+@pytest.mark.parametrize("path", CORPUS_FILES, ids=lambda p: f"{p.parent.name}/{p.name}")
+def test_the_inputs_that_once_failed_are_refused_in_one_line(path):
+    parsers = _corpus_parsers()
+    assert path.parent.name in parsers, f"{path}: put corpus files in {sorted(parsers)}"
+    for parse in parsers[path.parent.name]:
+        out = check(parse, path)
+        assert isinstance(out, RatSLAMError), f"{path.name} parsed: {out!r:.200}"
+
+
+def test_the_corpus_covers_every_parser_folder():
+    assert {p.parent.name for p in CORPUS_FILES} >= {"yaml", "posegraph"}

@@ -16,7 +16,10 @@ reference-format directory; DST must not exist (or be empty).
 The map is written, read back and compared before DST appears: a value the target
 format holds that did not survive is an error and nothing is written. What the target
 format cannot hold (pose-cell activity, creation frames and times, the config,
-module extras) is listed under "dropped"."""
+module extras) is listed under "dropped". A list the source held stale (a template's
+experience list or an experience's link list that disagrees with the map's ids, as the
+authors' merge leaves some) is written derived from the ids and listed under "changed",
+with both values."""
 
 EPILOG = """examples:
   torchratslam convert out/vt/state their_format/ --to reference
@@ -61,12 +64,26 @@ def main(args: argparse.Namespace) -> int:
     rep = convert_map(args.source, args.target, to=args.to, config=config)
     if args.json:
         print(json.dumps(rep, indent=1))
-    else:
-        print(
-            f"wrote {rep['target']} ({rep['format']}): {rep['templates']} templates, "
-            f"{rep['experiences']} experiences, {rep['links']} links; every value the "
-            "format holds read back unchanged"
+        return 0
+    templates = (
+        f"no templates (the source has no {rep['templates_missing']}; only "
+        f"{rep['templates']} template associations)"
+        if rep["templates_missing"]
+        else f"{rep['templates']} templates"
+    )
+    changed = rep["changed"]
+    print(
+        f"wrote {rep['target']} ({rep['format']}): {templates}, {rep['experiences']} "
+        f"experiences, {rep['links']} links; "
+        + (
+            f"{len(changed)} value(s) written differently from the source (below), every "
+            "other value the format holds read back unchanged"
+            if changed
+            else "every value the format holds read back unchanged"
         )
-        for item in rep["dropped"]:
-            print(f"  not held by the {rep['format']} format (dropped): {item}")
+    )
+    for item in changed:
+        print(f"  changed (a stale list, derived from the map's ids): {item}")
+    for item in rep["dropped"]:
+        print(f"  not held by the {rep['format']} format (dropped): {item}")
     return 0

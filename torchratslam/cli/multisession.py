@@ -11,6 +11,10 @@ kidnap between them (``single_concatenated``) and the last session alone
 ablation and backend comparison), ``report.md`` (the same as tables), figures like the
 paper's Fig. 9 (``fig9_*.png``: single map, first session, before merge, after merge,
 final, ICP overlay) and the session maps (``multi/<session>/state``).
+
+While it works, OUT holds ``running.json`` (the command, its start); a run that stopped
+(Ctrl-C, a crash) leaves it behind, and a new run into that OUT is refused: a
+multisession experiment cannot be resumed, so start it again with ``--overwrite``.
 """
 # The experiment is torchratslam.experiments.multisession_tour (seeds: multisession_seeds);
 # this module parses the arguments and calls it.
@@ -129,6 +133,12 @@ def register(subparsers: Any) -> argparse.ArgumentParser:
     )
     p.add_argument("--quiet", action="store_true", help="no progress bars, e.g. --quiet")
     p.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="start again in an OUT that holds a multisession run that did not finish, "
+        "e.g. --overwrite",
+    )
+    p.add_argument(
         "--rerun",
         action="store_true",
         help="watch the multisession mapping live in a rerun viewer (torchratslam[viewer]), "
@@ -142,6 +152,43 @@ def register(subparsers: Any) -> argparse.ArgumentParser:
     )
     p.set_defaults(func=main)
     return p
+
+
+RUNNING = "running.json"
+
+
+class _Running:
+    """OUT/running.json while the experiment works: a stopped one is never silently
+    replaced (refused unless ``overwrite``)."""
+
+    def __init__(self, out: Path, overwrite: bool) -> None:
+        from torchratslam.errors import InputError
+
+        self.path = out / RUNNING
+        if out.exists() and not out.is_dir():
+            raise InputError(f"--out {out}: exists and is not a directory; choose another path")
+        if self.path.exists() and not overwrite:
+            raise InputError(
+                f"{out} holds a multisession run that did not finish ({RUNNING}); it cannot "
+                "be resumed: start it again with --overwrite, or choose another --out"
+            )
+
+    def __enter__(self) -> _Running:
+        import json
+        import sys
+        import time
+
+        from ratslam_graph.io import atomic_write_text
+
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        started = time.strftime("%Y-%m-%d %H:%M:%S")
+        record = {"command": ["torchratslam", *sys.argv[1:]], "started": started}
+        atomic_write_text(self.path, json.dumps(record) + "\n")
+        return self
+
+    def __exit__(self, kind: Any, *rest: Any) -> None:
+        if kind is None:
+            self.path.unlink(missing_ok=True)
 
 
 def parse_seeds(spec: str) -> list[int]:
@@ -207,7 +254,6 @@ def _seeds_main(args: argparse.Namespace, overrides: dict[str, str], merge: dict
 def main(args: argparse.Namespace) -> int:
     from torchratslam.errors import ConfigError
     from torchratslam.experiments.multisession_report import report_markdown
-    from torchratslam.experiments.multisession_tour import MultisessionOptions, run_experiment
 
     backends = tuple(b.strip() for b in args.backends.split(",") if b.strip())
     overrides = {}
@@ -226,9 +272,24 @@ def main(args: argparse.Namespace) -> int:
         args.merge_persist = max(args.merge_persist, 2)
     if args.pc_shift_rotate:
         merge["pc_shift_rotate"] = True
-    if args.seeds is not None:
-        return _seeds_main(args, overrides, merge)
-    result = run_experiment(
+    with _Running(Path(args.out), args.overwrite):
+        if args.seeds is not None:
+            return _seeds_main(args, overrides, merge)
+        result = _experiment(args, backends, overrides, merge)
+    print(report_markdown(result["report"]))
+    print(f"wrote {Path(args.out) / 'report.json'}")
+    return 0
+
+
+def _experiment(
+    args: argparse.Namespace,
+    backends: tuple[str, ...],
+    overrides: dict[str, str],
+    merge: dict[str, Any],
+) -> Any:
+    from torchratslam.experiments.multisession_tour import MultisessionOptions, run_experiment
+
+    return run_experiment(
         args.config,
         args.tour,
         args.out,
@@ -248,6 +309,3 @@ def main(args: argparse.Namespace) -> int:
             rerun_save=args.rerun_save,
         ),
     )
-    print(report_markdown(result["report"]))
-    print(f"wrote {Path(args.out) / 'report.json'}")
-    return 0

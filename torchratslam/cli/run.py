@@ -20,11 +20,14 @@ torchratslam.maps.native.load_state).
 
 Everything that can be checked is checked before the first frame (OUT, the data's
 counts, the device, the config's limits). One run writes to an OUT at a time (a lock).
-When the run stops early (Ctrl-C, a bad frame, any error after frame N), the map as of
-frame N is saved in OUT/state, marked partial (metrics.json "partial": true,
-"stopped_at_frame": N), and the command exits non-zero; `run --resume OUT` continues it
-and ends with the map an uninterrupted run makes, bit for bit. Files in OUT that
-torchratslam did not write are never replaced."""
+A checkpoint (a loadable partial map in OUT/state) is saved every 1000 frames
+(--checkpoint-every). When the run stops early (Ctrl-C, a bad frame, any error after
+frame N), the map as of frame N is saved in OUT/state, marked partial (metrics.json
+"partial": true, "stopped_at_frame": N), and the command exits non-zero; `run --resume
+OUT` continues it (a run killed without a word, from its last checkpoint) and ends with
+the map an uninterrupted run makes, bit for bit. A new run refuses an OUT that holds a
+stopped run (continue it with --resume, or start again with --overwrite). torchratslam
+replaces only the files it wrote in OUT, never others."""
 
 EPILOG = """examples:
   torchratslam run --config configs/virtual_tour.yaml --data sim:virtual_tour --out out/vt
@@ -34,7 +37,11 @@ EPILOG = """examples:
   torchratslam run --config lab_tour --data lab.mp4 --odometry lab_odometry.csv --out out/lab
   torchratslam run --config virtual_tour --data sim:virtual_tour/session2 --out out/s2 \\
       --load out/s1/state
+  torchratslam run --resume out/s2          # continue a stopped or killed run
 """
+
+USAGE = """torchratslam run --config CONFIG --data DATA --out OUT [options]
+       torchratslam run --resume OUT [--no-progress] [--checkpoint-every K] [--device DEVICE]"""
 
 
 def register(subparsers: Any) -> argparse.ArgumentParser:
@@ -43,25 +50,28 @@ def register(subparsers: Any) -> argparse.ArgumentParser:
         help="map a dataset (directory, video, ROS bag or sim:NAME)",
         description=DESCRIPTION,
         epilog=EPILOG,
+        usage=USAGE,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    p.add_argument(
+    need = p.add_argument_group("required (all three, unless --resume)")
+    need.add_argument(
         "--config",
         metavar="CONFIG",
         help="a YAML of configs/ (path or name, e.g. 'virtual_tour') or an OpenRatSLAM "
         ".txt config, e.g. --config configs/irat.yaml",
     )
-    p.add_argument(
+    need.add_argument(
         "--data",
         metavar="DATA",
         help="dataset: a directory (frames/, odometry.csv, groundtruth.csv), a video "
         "(with --odometry), a ROS 1 .bag, a ROS 2 bag directory (sqlite3 or MCAP), or "
         "sim:NAME[/sessionK], e.g. --data sim:virtual_tour",
     )
-    p.add_argument(
+    need.add_argument(
         "--out",
         metavar="OUT",
-        help="output directory (created; files in it are replaced), e.g. --out out/vt",
+        help="output directory (created; torchratslam replaces only the files it wrote "
+        "there; an OUT holding a stopped run is refused), e.g. --out out/vt",
     )
     p.add_argument(
         "--backend",
@@ -176,15 +186,21 @@ def register(subparsers: Any) -> argparse.ArgumentParser:
         type=int,
         default=None,
         metavar="K",
-        help="save a loadable (partial) map in OUT/state every K frames, "
-        "e.g. --checkpoint-every 500",
+        help="save a loadable (partial) map in OUT/state every K frames (default 1000; "
+        "0: none), e.g. --checkpoint-every 500",
     )
     p.add_argument(
         "--resume",
         default=None,
         metavar="OUT",
-        help="continue a run that stopped early, with its recorded options; the final map is "
-        "the one an uninterrupted run makes, e.g. --resume out/vt",
+        help="continue a run that stopped early or was killed, with its recorded options; "
+        "the final map is the one an uninterrupted run makes, e.g. --resume out/vt",
+    )
+    p.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="start again in an OUT that holds a stopped run (replacing only torchratslam's "
+        "own files there), e.g. --overwrite",
     )
     p.add_argument(
         "--max-speed",
@@ -235,6 +251,7 @@ def main(args: argparse.Namespace) -> int:
         threads=args.threads,
         scale_report=args.scale_report,
         checkpoint_every=args.checkpoint_every,
+        overwrite=args.overwrite,
     )
     if args.resume is not None:
         given = [
@@ -242,7 +259,7 @@ def main(args: argparse.Namespace) -> int:
             for k in ("config", "data", "out", "backend", "max_frames", "odometry", "groundtruth")
             if getattr(args, k) is not None
         ]
-        given += [f"--{k}" for k in ("set", "load") if getattr(args, k)]
+        given += [f"--{k}" for k in ("set", "load", "overwrite") if getattr(args, k)]
         if given:
             raise InputError(
                 f"--resume takes the stopped run's options from {RUN_RECORD}; "

@@ -13,7 +13,9 @@ OUT receives results.csv (one row per run: every swept parameter, status, error,
 templates, experiences, links, ate_m, dead_reckoning_ate_m, wall_s, fps, ms per frame
 per module; also results.parquet when pyarrow is installed), rewritten atomically after
 every finished run, and figures/ (each metric against each parameter, speed against
-accuracy). A failed run records its error and the sweep goes on.
+accuracy). A failed run records its error and the sweep goes on. A stopped sweep (Ctrl-C,
+a crash) keeps its finished runs in results.csv: a new sweep into that OUT is refused;
+continue it with --resume, or start again with --overwrite.
 
 Sweep file (YAML):
   base: virtual_tour
@@ -49,6 +51,12 @@ def register(subparsers: Any) -> argparse.ArgumentParser:
         "--resume",
         action="store_true",
         help="keep the finished runs of OUT/results.csv and run only the others, e.g. --resume",
+    )
+    p.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="start again in an OUT whose results.csv holds a stopped or another sweep "
+        "(replacing results.csv), e.g. --overwrite",
     )
     p.add_argument(
         "--retry-failed",
@@ -97,6 +105,8 @@ def main(args: argparse.Namespace) -> int:
 
     if args.workers is not None and args.workers < 1:
         raise InputError(f"--workers must be >= 1, got {args.workers}")
+    if args.resume and args.overwrite:
+        raise InputError("--resume keeps OUT's runs and --overwrite replaces them; give one")
     out = Path(args.out)
     table = sweep(
         args.file,
@@ -109,6 +119,7 @@ def main(args: argparse.Namespace) -> int:
         batch=False if args.no_batch else None,
         figures=not args.no_figures,
         progress=not args.no_progress,
+        overwrite=args.overwrite,
     )
     rows = table.to_dict("records") if hasattr(table, "to_dict") else list(table)
     ok = [r for r in rows if r.get("status") == "ok"]

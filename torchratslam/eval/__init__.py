@@ -2,10 +2,13 @@
 paper's LibICP residual in :mod:`torchratslam.eval.icp`)."""
 
 from torchratslam.eval.icp import (
+    DEFAULT_START_ANGLES_DEG,
     PAPER_ICP_MSE_M2,
     LibIcpResult,
+    LibIcpStarts,
     compare_icp,
     libicp_point_to_point,
+    libicp_starts,
     nearest_neighbours,
 )
 from torchratslam.eval.metrics import (
@@ -21,9 +24,11 @@ from torchratslam.eval.metrics import (
 )
 
 __all__ = [
+    "DEFAULT_START_ANGLES_DEG",
     "PAPER_ICP_MSE_M2",
     "IcpResult",
     "LibIcpResult",
+    "LibIcpStarts",
     "Se2Alignment",
     "align_se2",
     "apply_se2",
@@ -34,5 +39,6 @@ __all__ = [
     "icp_rmse",
     "interpolate_groundtruth",
     "libicp_point_to_point",
+    "libicp_starts",
     "nearest_neighbours",
 ]

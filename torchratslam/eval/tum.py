@@ -29,13 +29,12 @@ fitted better, which no sensible estimate does).
 
 from __future__ import annotations
 
-import os
-import tempfile
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from ratslam_graph.atomic import atomic_write_text
 from ratslam_graph.geometry import wrap_angle
 from ratslam_graph.messages import ActionKind
 from torchratslam.errors import InputError, MapFormatError
@@ -85,15 +84,10 @@ def write_tum(path: str | Path, t: np.ndarray, poses: np.ndarray, *, comment: st
     lines.append(TUM_HEADER)
     lines += [" ".join(repr(float(v)) for v in row) for row in rows.tolist()]
     path = Path(path)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=".tmp-", suffix=".txt")
     try:
-        with os.fdopen(fd, "w") as fh:
-            fh.write("\n".join(lines) + "\n")
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-    return path
+        return atomic_write_text(path, "\n".join(lines) + "\n")
+    except OSError as exc:  # named by the user's file, not the temporary one beside it
+        raise InputError(f"{path}: cannot be written ({exc.strerror or exc})") from None
 
 
 def read_tum(path: str | Path) -> tuple[np.ndarray, np.ndarray]:

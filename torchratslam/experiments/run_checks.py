@@ -11,14 +11,14 @@ from typing import Any
 from ratslam_graph.atomic import Manifest
 from torchratslam.errors import InputError
 from torchratslam.experiments.run_options import RunOptions
-from torchratslam.experiments.run_outputs import OUTPUT_FILES, TUM_FILES
+from torchratslam.experiments.run_outputs import OUTPUT_FILES, TUM_FILES, UNMERGED_DIR
 from torchratslam.experiments.run_state import RUN_RECORD, STATE_DIR
 
 __all__ = ["check_applicable", "check_counts", "check_device", "check_out"]
 
 
 def check_counts(threads: int, max_frames: int | None, checkpoint_every: int | None) -> None:
-    """The counts must be positive.
+    """The counts must be positive (``checkpoint_every`` 0: no checkpoints).
 
     Raises:
         InputError: a count below one.
@@ -27,8 +27,10 @@ def check_counts(threads: int, max_frames: int | None, checkpoint_every: int | N
         raise InputError(f"--threads must be >= 1, got {threads}")
     if max_frames is not None and max_frames <= 0:
         raise InputError(f"--max-frames must be a positive number of frames, got {max_frames}")
-    if checkpoint_every is not None and checkpoint_every <= 0:
-        raise InputError(f"--checkpoint-every must be >= 1 frame, got {checkpoint_every}")
+    if checkpoint_every is not None and checkpoint_every < 0:
+        raise InputError(
+            f"--checkpoint-every must be >= 1 frame (0: no checkpoints), got {checkpoint_every}"
+        )
 
 
 def check_device(spec: str | None) -> Any:
@@ -118,7 +120,7 @@ def check_out(out: Path, *, resume: bool) -> None:
             if (out / name).is_dir():
                 raise InputError(f"{out / name} is a directory (a file goes there); move it away")
         own = Manifest(out).entries()
-        names = (*OUTPUT_FILES, *TUM_FILES, STATE_DIR, RUN_RECORD)
+        names = (*OUTPUT_FILES, *TUM_FILES, STATE_DIR, RUN_RECORD, UNMERGED_DIR)
         theirs = [n for n in names if (out / n).exists()]
         theirs = [n for n in theirs if n not in own]
         if theirs and not resume:

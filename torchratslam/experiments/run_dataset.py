@@ -4,12 +4,16 @@ that command): ``metrics.json``, ``experiences.csv``, ``trajectory.csv``, ``map.
 
 Everything that can be checked is checked before the first frame (OUT, the data's
 counts, the device, the config's limits; :mod:`torchratslam.experiments.run_checks`). One
-run writes to an OUT at a time (a lock). When the run stops early (Ctrl-C, a bad frame,
-any error after frame N), the map as of frame N is saved in OUT/state, marked partial
-(metrics.json ``"partial": true``, ``"stopped_at_frame": N``), and the error is raised
-again; :func:`resume_run` continues it and ends with the map an uninterrupted run makes,
-bit for bit (:mod:`torchratslam.experiments.run_state`). Files in OUT that torchratslam
-did not write (its manifest) are never replaced.
+run writes to an OUT at a time (a lock). The run saves a checkpoint (a loadable partial
+map) every :data:`DEFAULT_CHECKPOINT_EVERY` frames unless told otherwise, so a crash, an
+out-of-memory kill or a power cut loses at most that many frames. When the run stops
+early (Ctrl-C, a bad frame, any error after frame N), the map as of frame N is saved in
+OUT/state, marked partial (metrics.json ``"partial": true``, ``"stopped_at_frame": N``),
+and the error is raised again; :func:`resume_run` continues a stopped or killed run and
+ends with the map an uninterrupted run makes, bit for bit
+(:mod:`torchratslam.experiments.run_state`). A new run refuses an OUT that holds a
+stopped run unless told to overwrite it. Files in OUT that torchratslam did not write
+(its manifest) are never replaced.
 """
 
 from __future__ import annotations
@@ -39,10 +43,22 @@ from torchratslam.experiments.run_outputs import (
     write_scale_report,
     write_tum,
 )
-from torchratslam.experiments.run_state import HISTORY, RUN_RECORD, STATE_DIR, RunRecord
+from torchratslam.experiments.run_state import (
+    HISTORY,
+    RUN_RECORD,
+    STATE_DIR,
+    RunRecord,
+    SaveError,
+    new_run_id,
+    stopped_run,
+    write_record,
+)
 from torchratslam.readers.limits import MAX_SPEED, MAX_TURN_RATE
 
-__all__ = ["bag_topics", "resume_run", "run_dataset"]
+__all__ = ["DEFAULT_CHECKPOINT_EVERY", "bag_topics", "resume_run", "run_dataset"]
+
+DEFAULT_CHECKPOINT_EVERY = 1000
+"""Frames between two checkpoints when the settings do not say (0 turns them off)."""
 
 
 def _mirrored(data: Any) -> bool:
@@ -145,10 +161,12 @@ def run_dataset(
     """Map one dataset (localising in and merging with the ``options.load`` maps, if any)
     and write OUT; returns the metrics (what ``metrics.json`` holds).
 
-    Everything that can be checked is checked before the first frame. When the run stops
-    early after frame N (Ctrl-C, a bad frame, any error), the map as of frame N is saved
-    in OUT/state marked partial and the error is raised again; :func:`resume_run`
-    continues it.
+    Everything that can be checked is checked before the first frame. A checkpoint is
+    saved every ``settings.checkpoint_every`` frames (default
+    :data:`DEFAULT_CHECKPOINT_EVERY`; 0: none). When the run stops early after frame N
+    (Ctrl-C, a bad frame, any error), the map as of frame N is saved in OUT/state marked
+    partial and the error is raised again; :func:`resume_run` continues it, or a run
+    killed without a word (from its last checkpoint).
 
     Args:
         options: what to map and how (recorded in OUT/run.json; existing paths in it are
@@ -157,9 +175,12 @@ def run_dataset(
         settings: how this process runs it (default :class:`RunSettings`).
 
     Raises:
-        InputError: bad counts, unreadable data, no frames, OUT not usable, options that
-            do not apply to the data.
+        InputError: bad counts, unreadable data, no frames, OUT not usable (or holding a
+            stopped run, unless ``settings.overwrite``), options that do not apply to
+            the data.
         ConfigError: a bad config or override.
+        SaveError: a checkpoint or an output could not be written (the message names
+            the file and says how to resume).
     """
     from torchratslam.config import load_config
 
@@ -181,17 +202,17 @@ def run_dataset(
     )
     check_counts(settings.threads, options.max_frames, settings.checkpoint_every)
     config = load_config(options.config, **overrides)
-    return _start(opts, config, Path(out), settings, resume=False)
+    return _start(opts, config, Path(out), settings, run_id=new_run_id(), resume=False)
 
 
 def resume_run(out: str | Path, settings: RunSettings | None = None) -> RunMetrics:
-    """Continue a run that stopped early in ``out``, with the options recorded in
-    OUT/run.json; the final map is the one an uninterrupted run makes, bit for bit.
-    Returns the metrics.
+    """Continue a run that stopped early in ``out`` (stopped with a message, or killed:
+    from its last checkpoint, or from the first frame when it saved none), with the
+    options recorded in OUT/run.json; the final map is the one an uninterrupted run
+    makes, bit for bit. Returns the metrics.
 
     Raises:
-        InputError: nothing to resume in ``out`` (no record, a finished run, a run with
-            loaded maps).
+        InputError: nothing to resume in ``out`` (no record, a finished run).
     """
     from torchratslam.config import RatSLAMConfig
 
@@ -201,15 +222,40 @@ def resume_run(out: str | Path, settings: RunSettings | None = None) -> RunMetri
     if not out.is_dir():
         raise InputError(f"--resume {out}: not a directory")
     record = run_state.read_record(out)
+    if stopped_run(out) is None:
+        frames = _finished_frames(out)
+        raise InputError(f"--resume {out}: the run finished ({frames} frames); nothing to resume")
     opts = RunOptions.from_record(record["options"])
     config = RatSLAMConfig.from_flat(record["config_flat"], source=str(out / RUN_RECORD))
-    if opts.load:
-        raise InputError(f"--resume {out}: runs with --load cannot be resumed yet; re-run")
-    return _start(opts, config, out, settings, resume=True)
+    run_id = str(record.get("run_id") or "")
+    return _start(opts, config, out, settings, run_id=run_id, resume=True)
+
+
+def _finished_frames(out: Path) -> Any:
+    from torchratslam.maps.native import read_map_info
+
+    try:
+        return read_map_info(out / STATE_DIR).get("frames", "?")
+    except (RatSLAMError, OSError):
+        return "?"
+
+
+def _checkpoint_every(opts: RunOptions, settings: RunSettings) -> int:
+    """Frames between checkpoints (0: none): the settings', else the default; a
+    pipelined run saves none unless asked (and then refuses)."""
+    if settings.checkpoint_every is not None:
+        return int(settings.checkpoint_every)
+    return 0 if opts.pipelined else DEFAULT_CHECKPOINT_EVERY
 
 
 def _start(
-    opts: RunOptions, config: Any, out: Path, settings: RunSettings, *, resume: bool
+    opts: RunOptions,
+    config: Any,
+    out: Path,
+    settings: RunSettings,
+    *,
+    run_id: str,
+    resume: bool,
 ) -> RunMetrics:
     """The checks before the work, OUT's lock, then the run; a run that fails before its
     first frame leaves OUT as it was."""
@@ -235,7 +281,15 @@ def _start(
     lock = DirectoryLock(out, f"torchratslam run --out {out}").acquire()
     status = {"wrote": False}
     try:
-        return _run(opts, config, out, dev, resume, status, settings)
+        if not resume and not settings.overwrite:
+            stopped = stopped_run(out)
+            if stopped is not None:
+                raise InputError(
+                    f"{out} holds a run that {stopped}; continue it with: torchratslam run "
+                    f"--resume {out} (or start it again with --overwrite)"
+                )
+        record = RunRecord(options=opts, config_flat=config.to_flat(), run_id=run_id)
+        return _run(opts, config, out, dev, resume, status, settings, record)
     finally:
         lock.release()
         if not status["wrote"]:  # a run that failed before its first frame leaves OUT as it was
@@ -248,8 +302,21 @@ def _start(
                     break
 
 
+def _own_state_info(out: Path, run_id: str) -> dict[str, Any] | None:
+    """The info of OUT/state when it is a state this run saved (None: no state, or one
+    of another run)."""
+    from torchratslam.maps.native import read_map_info
+
+    if not (out / STATE_DIR).is_dir():
+        return None
+    info = read_map_info(out / STATE_DIR)
+    if "run_id" in info and run_id and info["run_id"] != run_id:
+        return None
+    return info
+
+
 def _open(
-    opts: RunOptions, config: Any, out: Path, device: Any, resume: bool
+    opts: RunOptions, config: Any, out: Path, device: Any, resume: bool, run_id: str
 ) -> tuple[Any, Any, Any, int]:
     """The data, the odometry source (None: the config's), the mapper (its state and
     history restored on ``resume``) and the frames already mapped."""
@@ -280,18 +347,20 @@ def _open(
     else:
         slam = RatSLAM(config, **kwargs)
     skip = 0
-    if resume:
-        from torchratslam.maps.native import load_state, read_map_info
+    info = _own_state_info(out, run_id) if resume else None
+    if info is None and resume:
+        print(
+            f"torchratslam run: {out} holds no checkpoint of the stopped run; mapping it "
+            "again from its first frame",
+            file=sys.stderr,
+        )
+    if info is not None:
+        from torchratslam.maps.native import load_state
         from torchratslam.maps.running import apply_state
 
-        info = read_map_info(out / STATE_DIR)
-        if not info.get("partial"):
-            raise InputError(
-                f"--resume {out}: the run finished ({info.get('frames', '?')} frames); "
-                "nothing to resume"
-            )
         apply_state(load_state(out / STATE_DIR), slam)
         run_state.restore_history(slam, out / STATE_DIR / HISTORY)
+        run_state.restore_multisession(slam, info)
         skip = int(slam.frame_index)
         if len(slam.trajectory()) != skip:
             raise InputError(f"{out / STATE_DIR}: history and map disagree; start the run again")
@@ -306,13 +375,13 @@ def _run(
     resume: bool,
     status: dict[str, bool],
     settings: RunSettings,
+    record: RunRecord,
 ) -> RunMetrics:
     """Open the data, run, write the outputs (``status["wrote"]`` once anything is)."""
     from torchratslam.pipeline import RunResult
 
-    data, odometry, slam, skip = _open(opts, config, out, device, resume)
+    data, odometry, slam, skip = _open(opts, config, out, device, resume, record.run_id)
     remaining = None if opts.max_frames is None else opts.max_frames - skip
-    record = RunRecord(options=opts, config_flat=config.to_flat())
     extras = RunExtras(
         data=str(opts.data),
         config=str(opts.config),
@@ -337,7 +406,8 @@ def _run(
         source = observer.frames(data)
         if not hasattr(source, "frames"):
             source = _IterSource(source)
-    every = settings.checkpoint_every
+    every = _checkpoint_every(opts, settings)
+    saved = {"frame": skip if skip else None}  # the last good checkpoint
     t0 = time.perf_counter()
 
     def on_step(r: Any) -> None:
@@ -346,14 +416,22 @@ def _run(
             observer(r)
         if recorder is not None:
             recorder.on_step(r)
+        if not status["wrote"]:  # OUT now holds a run that can be resumed
+            status["wrote"] = True
+            _saving(lambda: write_record(out, record), out, out / RUN_RECORD, saved["frame"])
         if every and slam.frame_index % every == 0:
             info = {
                 "partial": True,
                 "stopped_at_frame": int(slam.frame_index),
                 "reason": "checkpoint",
             }
-            status["wrote"] = True
-            run_state.save_run_state(slam, out, record, info)
+            _saving(
+                lambda: run_state.save_run_state(slam, out, record, info),
+                out,
+                out / STATE_DIR,
+                saved["frame"],
+            )
+            saved["frame"] = int(slam.frame_index)
 
     frames = _Frames(source, skip)
     try:
@@ -365,13 +443,13 @@ def _run(
                 result = slam.run(
                     frames,
                     max_frames=remaining,
-                    progress=settings.progress,
+                    progress=f"run {opts.data}" if settings.progress else False,
                     callback=on_step,
                 )
     except BaseException as exc:
         done = int(slam.frame_index)
-        if done <= skip:
-            raise  # nothing was mapped: nothing to keep
+        if done <= skip or isinstance(exc, SaveError):
+            raise  # nothing was mapped, or nothing can be written: nothing to keep
         reason = "interrupted (Ctrl-C)" if isinstance(exc, KeyboardInterrupt) else _one_line(exc)
         n_t, n_e, n_l = slam.counts()
         result = RunResult(
@@ -390,7 +468,7 @@ def _run(
         except (RatSLAMError, OSError) as save_exc:
             print(
                 f"torchratslam run: stopped at frame {done} ({reason}) and the map could not "
-                f"be saved: {_one_line(save_exc)}",
+                f"be saved: {_one_line(save_exc)}; {_kept(out, saved['frame'])}",
                 file=sys.stderr,
             )
             raise exc from None
@@ -407,17 +485,45 @@ def _run(
     if result.frames == 0 and not resume:
         raise InputError(f"{opts.data}: no frames were read; check the dataset")
     status["wrote"] = True
-    if opts.tum:
-        Manifest(out).add(list(TUM_FILES))  # recorded before they are written
-        extras = dataclasses.replace(extras, **write_tum(slam, out, poses, data))
-    metrics = write_outputs(
-        slam, out, result, data=data, extras=extras, record=record, info={"partial": False}
-    )
-    if recorder is not None and len(recorder.templates):
-        Manifest(out).add(list(SCALE_FILES))
-        scale = write_scale_report(recorder, slam, out, str(opts.data))
-        metrics = dataclasses.replace(metrics, scale=scale)
+    try:
+        if opts.tum:
+            Manifest(out).add(list(TUM_FILES))  # recorded before they are written
+            extras = dataclasses.replace(extras, **write_tum(slam, out, poses, data))
+        metrics = write_outputs(
+            slam, out, result, data=data, extras=extras, record=record, info={"partial": False}
+        )
+        if recorder is not None and len(recorder.templates):
+            Manifest(out).add(list(SCALE_FILES))
+            scale = write_scale_report(recorder, slam, out, str(opts.data))
+            metrics = dataclasses.replace(metrics, scale=scale)
+        write_record(out, dataclasses.replace(record, finished=True))  # last of all
+    except OSError as exc:
+        raise _save_error(exc, out, out, saved["frame"]) from None
     return metrics
+
+
+def _kept(out: Path, frame: int | None) -> str:
+    """What is kept after a failed save, and how to go on."""
+    if frame is None:
+        kept = "no checkpoint was saved yet (a resumed run maps from the first frame)"
+    else:
+        kept = f"the last checkpoint (frame {frame}) is kept in {out / STATE_DIR}"
+    return f"{kept}; free space, then continue with: torchratslam run --resume {out}"
+
+
+def _save_error(exc: OSError, out: Path, target: Path, frame: int | None) -> SaveError:
+    name = exc.filename if exc.filename else target
+    why = exc.strerror or _one_line(exc)
+    return SaveError(f"cannot write {name} ({why}); {_kept(out, frame)}")
+
+
+def _saving(save: Any, out: Path, target: Path, frame: int | None) -> None:
+    """``save()``; an OS error (a full disk) becomes a :class:`SaveError` naming the file
+    and the last good checkpoint (atomic writes leave that one whole)."""
+    try:
+        save()
+    except OSError as exc:
+        raise _save_error(exc, out, target, frame) from None
 
 
 def _one_line(exc: BaseException) -> str:

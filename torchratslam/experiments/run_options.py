@@ -91,7 +91,11 @@ class RunSettings:
         threads: torch intra-op threads.
         scale_report: record the cost per frame as the map grows (OUT/scale.json,
             scale.md, scale.png; :mod:`torchratslam.eval.scale`).
-        checkpoint_every: save a loadable partial map in OUT/state every this many frames.
+        checkpoint_every: save a loadable partial map in OUT/state every this many frames
+            (None: every ``run_dataset.DEFAULT_CHECKPOINT_EVERY`` frames in the
+            sequential mode; 0: never).
+        overwrite: start a new run in an OUT that holds a stopped one (otherwise
+            refused); only torchratslam's own files are replaced.
     """
 
     device: str | None = None
@@ -99,3 +103,4 @@ class RunSettings:
     threads: int = 1
     scale_report: bool = False
     checkpoint_every: int | None = None
+    overwrite: bool = False

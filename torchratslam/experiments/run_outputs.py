@@ -1,6 +1,11 @@
 """What a dataset run writes to OUT: ``metrics.json``, ``experiences.csv``,
 ``trajectory.csv``, ``map.png``, ``pose_cells.png``, the saved state, and on request the
 TUM trajectories and the scale report; and the line ``torchratslam run`` prints.
+
+A run with stored maps (``--load``) whose maps did not all merge with its own writes
+each map that never merged to ``OUT/unmerged/mapK`` (K: its place among the ``--load``
+options), says so in a warning and lists it in ``metrics.json`` (``"unmerged"``); the
+run's map in ``OUT/state`` holds the merged maps only.
 """
 
 from __future__ import annotations
@@ -8,6 +13,7 @@ from __future__ import annotations
 import csv
 import io
 import json
+import logging
 import math
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -24,14 +30,19 @@ __all__ = [
     "OUTPUT_FILES",
     "SCALE_FILES",
     "TUM_FILES",
+    "UNMERGED_DIR",
     "RunExtras",
     "RunMetrics",
     "summary_line",
     "write_outputs",
     "write_scale_report",
     "write_tum",
+    "write_unmerged",
 ]
 
+log = logging.getLogger(__name__)
+
+UNMERGED_DIR = "unmerged"
 OUTPUT_FILES = ("metrics.json", "experiences.csv", "trajectory.csv", "map.png", "pose_cells.png")
 TUM_FILES = ("tum_experience.txt", "tum_frame.txt", "tum_groundtruth.txt")
 SCALE_FILES = ("scale.json", "scale.md", "scale.png")
@@ -89,6 +100,10 @@ class RunMetrics:
         ate_rmse_m: the map's ATE (with ground truth).
         dead_reckoning_ate_m: dead reckoning's ATE (with ground truth).
         merges: a multisession run's merges.
+        unmerged: the stored maps that never merged with the run's map: per map its
+            ``--load`` option (``map``) and where it was written (``written``).
+        input_warnings: what the reader found wrong with the input (gaps, repeats or
+            backward steps in the frame numbering), one line each.
         partial: True for a run that stopped early.
         stopped_at_frame: the frame a run that stopped early stopped at.
         reason: why a run stopped early.
@@ -117,6 +132,8 @@ class RunMetrics:
     ate_rmse_m: float | None = None
     dead_reckoning_ate_m: float | None = None
     merges: Any = None
+    unmerged: list[dict[str, str]] | None = None
+    input_warnings: list[str] | None = None
     partial: bool | None = None
     stopped_at_frame: int | None = None
     reason: str | None = None
@@ -203,6 +220,7 @@ def _metrics(
     }
     merges = getattr(slam, "merges", None)  # a multisession run
     partial = bool(info.get("partial"))
+    unmerged = info.get("unmerged")
     return RunMetrics(
         frames=int(slam.frame_index),
         frames_this_run=int(result.frames),
@@ -225,6 +243,8 @@ def _metrics(
         ate_rmse_m=None if ate is None else float(ate),
         dead_reckoning_ate_m=None if dr is None else float(dr),
         merges=None if merges is None else _jsonable(merges),
+        unmerged=unmerged,
+        input_warnings=info.get("input_warnings"),
         partial=True if partial else None,
         stopped_at_frame=int(info.get("stopped_at_frame", slam.frame_index)) if partial else None,
         reason=str(info.get("reason", "")) if partial else None,
@@ -277,6 +297,10 @@ def write_outputs(
     Manifest(out).add([*OUTPUT_FILES, STATE_DIR])
     poses, traj = _write_tables(slam, out)
     gt_xy, ate, dr = _groundtruth_errors(slam, data, traj)
+    unmerged = write_unmerged(slam, out, extras.loaded or (), partial=bool(info.get("partial")))
+    if unmerged is not None:
+        info["unmerged"] = unmerged
+    info["input_warnings"] = list(getattr(data, "input_warnings", ())) or None
     metrics = _metrics(slam, result, extras, ate, dr, info)
     _write_figures(slam, out, poses, traj, gt_xy, data, extras.data)
     atomic_write_text(
@@ -284,6 +308,40 @@ def write_outputs(
         json.dumps(metrics.to_json(), indent=2, default=json_default) + "\n",
     )
     return metrics
+
+
+def write_unmerged(
+    slam: Any, out: Path, loaded: tuple[str, ...] | Any, *, partial: bool = False
+) -> list[dict[str, str]] | None:
+    """Write each stored map that never merged with the run's map to
+    ``OUT/unmerged/mapK`` and say so (a warning); returns the list for metrics.json
+    (None for a run without stored maps)."""
+    from ratslam_graph.atomic import make_dirs
+    from torchratslam.maps.native import save_map
+
+    pending = getattr(slam, "pending", None)
+    stored = getattr(slam, "stored", None)
+    if pending is None or stored is None or not loaded:
+        return None
+    rows: list[dict[str, str]] = []
+    if pending:
+        Manifest(out).add([UNMERGED_DIR])
+        make_dirs(out / UNMERGED_DIR)
+    for k in pending:
+        name = f"{UNMERGED_DIR}/map{k}"
+        save_map(stored[k], out / name)
+        source = str(loaded[k]) if k < len(loaded) else f"map{k}"
+        rows.append({"map": source, "written": name})
+        log.warning(
+            "the loaded map %s never merged with this run's map (none of its templates was "
+            "seen%s); %s holds the run's map alone, and the loaded map is written unchanged "
+            "to %s",
+            source,
+            " before the run stopped" if partial else "",
+            out / STATE_DIR,
+            out / name,
+        )
+    return rows
 
 
 def write_tum(slam: Any, out: Path, recorder: Any, data: Any) -> dict[str, Any]:
@@ -334,4 +392,10 @@ def summary_line(metrics: RunMetrics, out: Path) -> str:
         merges = m.merges
         n_merges = len(merges) if isinstance(merges, (list, dict)) else 0
         line += f", {n_merges} merge{'s' if n_merges != 1 else ''}"
+        if m.unmerged:
+            n = len(m.unmerged)
+            line += (
+                f" ({n} loaded map{'s' if n != 1 else ''} never merged: written to "
+                f"{out / UNMERGED_DIR})"
+            )
     return f"{line}; wrote {out}"

@@ -1,8 +1,12 @@
 """The saved state of a dataset run and what a resumed run needs: OUT/state (the map and
-its per-frame history) and OUT/run.json (the run's options and config).
+its per-frame history) and OUT/run.json (the run's options, config, identity and whether
+it finished).
 
-A run saves its state here at every checkpoint and when it stops;
-:func:`torchratslam.experiments.run_dataset.resume_run` reads it back.
+A run writes OUT/run.json after its first frame (``finished: false``), saves its state at
+every checkpoint and when it stops, and marks the record finished last of all; so an OUT
+whose record is not finished holds a run that stopped (a crash or ``kill -9`` included),
+and :func:`torchratslam.experiments.run_dataset.resume_run` continues it from its last
+saved state (or from the first frame when none was saved).
 """
 
 from __future__ import annotations
@@ -15,7 +19,7 @@ from typing import Any
 import numpy as np
 
 from ratslam_graph.atomic import Manifest, atomic_write_text
-from torchratslam.errors import InputError
+from torchratslam.errors import InputError, RatSLAMError
 from torchratslam.experiments.run_options import RunOptions
 
 __all__ = [
@@ -23,10 +27,15 @@ __all__ = [
     "RUN_RECORD",
     "STATE_DIR",
     "RunRecord",
+    "SaveError",
     "json_default",
+    "new_run_id",
     "read_record",
     "restore_history",
+    "restore_multisession",
     "save_run_state",
+    "stopped_run",
+    "write_record",
 ]
 
 STATE_DIR = "state"
@@ -41,23 +50,44 @@ class RunRecord:
     Attributes:
         options: the run's options.
         config_flat: the config as flat keys (``RatSLAMConfig.to_flat``).
+        run_id: this run's identity (a saved state carries it too, so a state left by an
+            earlier run in OUT is never taken for this one's).
+        finished: True once every output of the run is written.
         format: the record's format name.
         version: the record's format version.
     """
 
     options: RunOptions
     config_flat: dict[str, Any]
+    run_id: str = ""
+    finished: bool = False
     format: str = "torchratslam-run"
     version: int = 1
 
     def to_json(self) -> dict[str, Any]:
-        """The record as run.json holds it (format, version, options, config_flat)."""
+        """The record as run.json holds it (format, version, run_id, finished, options,
+        config_flat)."""
         return {
             "format": self.format,
             "version": self.version,
+            "run_id": self.run_id,
+            "finished": self.finished,
             "options": asdict(self.options),
             "config_flat": self.config_flat,
         }
+
+
+class SaveError(RatSLAMError):
+    """A checkpoint or an output could not be written (a full disk, a lost mount); the
+    message names the file, the last good checkpoint and how to resume."""
+
+
+def new_run_id() -> str:
+    """A fresh run identity (time and random bits)."""
+    import time
+    import uuid
+
+    return f"{time.strftime('%Y%m%dT%H%M%S')}-{uuid.uuid4().hex[:12]}"
 
 
 def json_default(v: Any) -> Any:
@@ -92,11 +122,43 @@ def restore_history(slam: Any, path: Path) -> None:
         raise InputError(f"{path}: the run's history cannot be read ({exc}); re-run") from None
 
 
+def _multisession_info(slam: Any) -> dict[str, Any] | None:
+    """What a multisession run (``--load``) needs besides its map to go on: the stored
+    maps not merged yet and the merges so far (None for a single-session run)."""
+    if not hasattr(slam, "pending") or not hasattr(slam, "merges"):
+        return None
+    merges = json.loads(json.dumps(slam.merges, default=json_default))
+    return {"pending": [int(k) for k in slam.pending], "merges": merges}
+
+
+def restore_multisession(slam: Any, info: dict[str, Any]) -> None:
+    """Put a saved multisession run's pending maps and merges back into ``slam``."""
+    saved = info.get("multisession")
+    if saved is None or not hasattr(slam, "pending"):
+        return
+    slam.pending = [int(k) for k in saved.get("pending", [])]
+    slam.merges = list(saved.get("merges", []))
+
+
+def write_record(out: Path, record: RunRecord) -> None:
+    """OUT/run.json, atomically (recorded in OUT's manifest first)."""
+    Manifest(out).add([RUN_RECORD])
+    atomic_write_text(
+        out / RUN_RECORD, json.dumps(record.to_json(), indent=1, default=json_default)
+    )
+
+
 def save_run_state(slam: Any, out: Path, record: RunRecord, info: dict[str, Any]) -> None:
-    """OUT/state (with the history) and OUT/run.json, each atomically; state first."""
+    """OUT/state (with the history) and OUT/run.json, each atomically; state first. The
+    state's info carries the record's ``run_id`` (and a multisession run's pending maps
+    and merges)."""
     from torchratslam.maps.native import save_map
     from torchratslam.maps.running import state_from_slam
 
+    info = {**info, "run_id": record.run_id}
+    ms = _multisession_info(slam)
+    if ms is not None:
+        info["multisession"] = ms
     Manifest(out).add([STATE_DIR, RUN_RECORD])  # recorded before they are written
     save_map(
         state_from_slam(slam),
@@ -104,9 +166,48 @@ def save_run_state(slam: Any, out: Path, record: RunRecord, info: dict[str, Any]
         info=info,
         extra_files={HISTORY: _history_writer(slam)},
     )
-    atomic_write_text(
-        out / RUN_RECORD, json.dumps(record.to_json(), indent=1, default=json_default)
-    )
+    write_record(out, record)
+
+
+def stopped_run(out: Path) -> str | None:
+    """A description of the stopped run OUT holds (``"stopped at frame N (reason)"``), or
+    None when OUT holds none (no record, or a finished run).
+
+    A record without ``finished`` (an older one) counts as stopped when its state is
+    marked partial.
+    """
+    from torchratslam.maps.native import read_map_info
+
+    p = out / RUN_RECORD
+    if not p.is_file():
+        return None
+    try:
+        record = json.loads(p.read_text())
+    except (OSError, ValueError):
+        return None
+    if not isinstance(record, dict):
+        return None
+    info: dict[str, Any] = {}
+    if (out / STATE_DIR).is_dir():
+        try:
+            info = dict(read_map_info(out / STATE_DIR))
+        except (RatSLAMError, OSError, ValueError):
+            info = {}
+    finished = record.get("finished")
+    if finished is None:  # a record of an older version: the state says
+        finished = not info.get("partial", False)
+    if finished:
+        return None
+    same = info and info.get("run_id", record.get("run_id")) == record.get("run_id")
+    if not same:
+        return "stopped before its first checkpoint"
+    if not info.get("partial"):
+        return "stopped while writing its outputs"
+    frame = info.get("stopped_at_frame", "?")
+    reason = info.get("reason", "")
+    if reason == "checkpoint":
+        reason = "killed or crashed; last checkpoint"
+    return f"stopped at frame {frame} ({reason})"
 
 
 def read_record(out: Path) -> dict[str, Any]:

@@ -20,17 +20,20 @@ from typing import Any
 
 import numpy as np
 
-from torchratslam.errors import InputError, MapFormatError
+from torchratslam.errors import InputError, MapFormatError, RatSLAMError
 from torchratslam.maps import native
 from torchratslam.maps.compat import check_compatible
 from torchratslam.maps.reference_format import (
     EXP_EXTRAS,
     TAIL,
+    compare_texts,
     is_reference_map,
     read_reference,
+    read_texts,
+    reference_texts,
     write_reference,
 )
-from torchratslam.maps.state import MISSING_KEY, MapState
+from torchratslam.maps.state import INT_FIELDS, MISSING_KEY, MapState
 
 __all__ = ["convert_map", "load_state", "map_format", "reference_losses"]
 
@@ -133,26 +136,75 @@ def reference_losses(state: MapState) -> list[str]:
     return out
 
 
-def _differences(a: MapState, b: MapState, *, reference: bool) -> list[str]:
-    if not reference:
-        return [] if a.equals(b) else ["the native map read back differs from the source"]
+def _first_difference(x: np.ndarray, y: np.ndarray) -> str:
+    """``" (first at [3]: 0.5 -> 0.499)"`` for two arrays of one shape, or their shapes."""
+    if x.shape != y.shape:
+        return f" (shape {x.shape} -> {y.shape})"
+    if x.size == 0:
+        return ""
+    idx = tuple(int(i) for i in np.argwhere(x != y)[0]) if (x != y).any() else ()
+    if not idx:
+        return f" (dtype {x.dtype} -> {y.dtype})"
+    return f" (first at {list(idx)}: {x[idx]!r} -> {y[idx]!r})"
+
+
+def _array_changes(
+    a: dict[str, np.ndarray], b: dict[str, np.ndarray], *, dtypes: bool = True
+) -> list[str]:
     out = []
-    for name in _HELD:
-        x, y = np.asarray(getattr(a, name)), np.asarray(getattr(b, name))
-        if x.size != y.size or not np.array_equal(x.reshape(-1), y.reshape(-1)):
-            out.append(name)
-    for name in _IDS:
-        i, j = getattr(a, name), getattr(b, name)
-        if i != j:
-            out.append(f"{name} ({i} -> {j})")
-    for key in sorted(_REF_EXTRAS):
-        ea, eb = a.extra.get(key), b.extra.get(key)
-        if ea is None or eb is None:
-            if (ea is None) != (eb is None):
-                out.append(f"extra {key}")
-        elif not np.array_equal(ea, eb):
-            out.append(f"extra {key}")
+    for name in sorted(set(a) | set(b)):
+        x, y = a.get(name), b.get(name)
+        if x is None or y is None:
+            out.append(f"{name} ({'dropped' if y is None else 'added'})")
+        elif x.shape != y.shape or (dtypes and x.dtype != y.dtype) or not np.array_equal(x, y):
+            out.append(name + _first_difference(np.asarray(x), np.asarray(y)))
     return out
+
+
+def _value_changes(a: dict[str, Any], b: dict[str, Any], what: str = "") -> list[str]:
+    prefix = f"{what} " if what else ""
+    return [
+        f"{prefix}{k} ({a.get(k)!r} -> {b.get(k)!r})"
+        for k in sorted(set(a) | set(b))
+        if a.get(k) != b.get(k)
+    ]
+
+
+def _differences(a: MapState, b: MapState, *, reference: bool) -> list[str]:
+    """Every value of ``a`` that ``b`` does not hold the same (for the reference
+    format: every value that format holds), each with its first difference."""
+    if not reference:
+        out = _array_changes(a.arrays(), b.arrays())
+        out += _value_changes(
+            {k: getattr(a, k) for k in INT_FIELDS}, {k: getattr(b, k) for k in INT_FIELDS}
+        )
+        out += _value_changes(a.scalars, b.scalars, "scalar")
+        return out + _value_changes(a.config, b.config, "config")
+    n_a, n_b = a.n_templates, b.n_templates
+    held = {k: np.asarray(getattr(a, k)) for k in _HELD}
+    back = {k: np.asarray(getattr(b, k)) for k in _HELD}
+    # the format stores a template's values, not its (Y, X) split, and writes float64
+    for arrays, n in ((held, n_a), (back, n_b)):
+        t = arrays["templates"]
+        arrays["templates"] = t.reshape(n, int(np.prod(t.shape[1:]))).astype(np.float64)
+    held.update({f"extra {k}": np.asarray(v) for k, v in a.extra.items() if k in _REF_EXTRAS})
+    back.update({f"extra {k}": np.asarray(v) for k, v in b.extra.items() if k in _REF_EXTRAS})
+    out = _array_changes(held, back, dtypes=False)
+    out += _value_changes({k: getattr(a, k) for k in _IDS}, {k: getattr(b, k) for k in _IDS})
+    kept = (MISSING_KEY, TAIL)
+    ref_a = {k: v for k, v in a.scalars.items() if k.startswith(kept)}
+    ref_b = {k: v for k, v in b.scalars.items() if k.startswith(kept)}
+    return out + _value_changes(ref_a, ref_b, "scalar")
+
+
+def _shown(exc: BaseException, work: Path, dst: Path) -> str:
+    """The message of ``exc`` naming ``dst`` where it names the temporary ``work``."""
+    return str(exc).replace(str(work), str(dst))
+
+
+def _listed(items: list[str], limit: int = 5) -> str:
+    more = f"; and {len(items) - limit} more" if len(items) > limit else ""
+    return "; ".join(items[:limit]) + more
 
 
 def convert_map(
@@ -162,7 +214,12 @@ def convert_map(
     nothing the target format can hold is lost.
 
     The map is written into a temporary directory beside ``target``, read back and
-    compared, and only then moved to ``target`` (which must not exist, or be empty).
+    compared field by field, and only then moved to ``target`` (which must not exist, or
+    be empty). A reference-format source is also compared, field by field, with the
+    files the result gives in that format: a template's experience list or an
+    experience's link list that the source held stale (their merge leaves some) comes
+    back derived from the map's ids, and is listed under ``changed``; any other value
+    that differs is an error.
 
     Args:
         source: any map :func:`load_state` reads.
@@ -171,13 +228,18 @@ def convert_map(
         config: a ``RatSLAMConfig`` or flat dict (shapes a reference map's templates).
 
     Returns:
-        ``source``, ``source_format``, ``target``, ``format``, the counts, ``dropped``
-        (what the target format cannot hold; empty for native) and ``checked`` (the
-        fields compared after reading back).
+        ``source``, ``source_format``, ``target``, ``format``, the counts,
+        ``templates_missing`` (the file the source's templates were missing with, or
+        None), ``dropped``
+        (what the target format cannot hold; empty for native), ``changed`` (each
+        value written differently from the source, with both values) and ``checked``
+        (the fields compared after reading back).
 
     Raises:
-        InputError: ``to`` is unknown, ``target`` exists and is not an empty directory.
-        MapFormatError: a value the target format holds did not survive the round trip.
+        InputError: ``to`` is unknown, ``target`` exists and is not an empty directory,
+            or cannot be written.
+        MapFormatError: a value the target format holds did not survive the round trip
+            (naming each, with its values); nothing is written.
     """
     import shutil
     import tempfile
@@ -188,33 +250,49 @@ def convert_map(
     if dst.exists() and (not dst.is_dir() or any(dst.iterdir())):
         raise InputError(f"{dst} exists and is not empty; convert writes a new directory")
     state = load_state(src, config)
+    source_format = map_format(src)
     dst.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=f".{dst.name}.convert-", dir=dst.parent))
+    work = tmp / "map"
     try:
-        work = tmp / "map"
         if to == "reference":
             write_reference(state, work)
-            back = read_reference(work, state.config if state.config else config)
+            cfg = state.config if state.config else config
+            back = read_reference(work, cfg, shown_as=dst)
+            written = read_texts(work)
         else:
             native.save_map(state, work)
             back = native.load_map(work)
+            written = reference_texts(back)
         bad = _differences(state, back, reference=to == "reference")
+        changed: list[str] = []
+        if source_format == "reference":
+            for change in compare_texts(read_texts(src), written):
+                (changed if change.derived else bad).append(change.text)
         if bad:
             raise MapFormatError(
-                f"converting {src} to the {to} format would change {', '.join(bad)}; "
+                f"converting {src} to the {to} format would change {_listed(bad)}; "
                 "nothing was written"
             )
         if dst.exists():
             dst.rmdir()  # empty, checked above
         work.rename(dst)
+    except OSError as exc:
+        raise InputError(
+            f"{dst}: cannot be written ({exc.strerror or _shown(exc, work, dst)})"
+        ) from None
+    except RatSLAMError as exc:
+        raise type(exc)(_shown(exc, work, dst)) from None
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
     return {
         "source": str(src),
-        "source_format": map_format(src),
+        "source_format": source_format,
         "target": str(dst),
         "format": to,
         **state.summary(),
+        "templates_missing": state.scalars.get(MISSING_KEY) or None,
         "dropped": reference_losses(state) if to == "reference" else [],
+        "changed": changed,
         "checked": list(_HELD + _IDS) + sorted(_REF_EXTRAS) if to == "reference" else ["all"],
     }

@@ -25,7 +25,9 @@ line), every scalar is Python's ``str()`` of a float or an int. The files:
 
 Reading: the per-template experience lists and per-experience link lists are derived
 from ``posecellexperiences.txt`` / ``links.txt`` (after a merge their code can leave
-stale lists in the files); they are parsed only to check them. Ids that equal the
+stale lists in the files); they are parsed only to check them, and a template's list
+that disagrees is a warning. :func:`compare_texts` names every field whose value differs
+between two saves (``torchratslam convert`` reports with it). Ids that equal the
 record position are checked. Values with no place in :class:`MapState` are kept so a
 write gives them back: the goal list (``extra["ref.goal_list"]``), non-default
 ``time_from_current_s`` / ``goal_to_current`` / ``current_to_goal``
@@ -47,6 +49,7 @@ from __future__ import annotations
 
 import logging
 import math
+from dataclasses import dataclass
 from functools import partial
 from pathlib import Path
 from typing import Any, BinaryIO
@@ -58,12 +61,18 @@ from torchratslam.errors import InputError, MapFormatError
 from torchratslam.maps.state import MISSING_KEY, MapState
 
 __all__ = [
+    "DERIVED",
     "FILES",
     "GOAL_FILE",
+    "LAYOUT",
     "MISSING_KEY",
     "REQUIRED_FILES",
+    "FieldChange",
+    "compare_texts",
     "is_reference_map",
     "read_reference",
+    "read_texts",
+    "reference_texts",
     "write_reference",
 ]
 
@@ -102,20 +111,20 @@ def is_reference_map(directory: str | Path) -> bool:
 class _File:
     """The lines of one file as their loader's ``readline()`` sees them."""
 
-    def __init__(self, path: Path) -> None:
-        self.path = path
+    def __init__(self, path: Path, shown: Path | None = None) -> None:
+        self.path = path if shown is None else shown  # the name in messages
         try:
             text = path.read_bytes().decode("utf-8")
         except FileNotFoundError:
             raise MapFormatError(
-                f"{path} is missing: a reference-format map needs {', '.join(REQUIRED_FILES)}"
+                f"{self.path} is missing: a reference-format map needs {', '.join(REQUIRED_FILES)}"
             ) from None
         except UnicodeDecodeError as exc:
             raise MapFormatError(
-                f"{path}, byte {exc.start}: not UTF-8 text; the file is corrupt"
+                f"{self.path}, byte {exc.start}: not UTF-8 text; the file is corrupt"
             ) from None
         except OSError as exc:
-            raise MapFormatError(f"{path} cannot be read: {exc.strerror or exc}") from None
+            raise MapFormatError(f"{self.path} cannot be read: {exc.strerror or exc}") from None
         self.lines = text.split("\n")
         if self.lines[-1] == "":  # the newline ending the last line; '' is the end
             self.lines.pop()
@@ -263,7 +272,9 @@ def _current(f: _File, at: int, value: int, n: int, what: str) -> int:
     raise f.error(at, f"{what} {value} is not an id in 0..{n - 1}")
 
 
-def read_reference(directory: str | Path, config: Any = None) -> MapState:
+def read_reference(
+    directory: str | Path, config: Any = None, *, shown_as: str | Path | None = None
+) -> MapState:
     """Read a map saved by the multisession paper's implementation.
 
     Args:
@@ -271,6 +282,9 @@ def read_reference(directory: str | Path, config: Any = None) -> MapState:
         config: a ``RatSLAMConfig`` or flat dict giving ``template_x_size`` /
             ``template_y_size`` (the files hold only their product; without a config a
             template of size S is read as one row ``(1, S)``) and the pose-cell sizes.
+        shown_as: the directory's name in messages and warnings (default: ``directory``;
+            a command reading back what it wrote to a temporary place names the user's
+            target instead).
 
     Returns:
         A validated :class:`MapState` (``scalars["imported_from"] == "reference"``).
@@ -280,9 +294,11 @@ def read_reference(directory: str | Path, config: Any = None) -> MapState:
             naming the file and line), or the template size disagrees with ``config``.
     """
     d = Path(directory)
+    shown = d if shown_as is None else Path(shown_as)
+    file = partial(_open, d, shown)
     flat = _flat_config(config)
     # ---------------------------------------------------------------- templates
-    pvt = _File(d / PVT)
+    pvt = file(PVT)
     n, pvt_end = pvt.records(0, 6, tail=True, what="templates")
     ids = pvt.ids(0, 6, n, 0, "template id", 0, max(n, 1))
     if (ids != np.arange(n)).any():
@@ -290,12 +306,12 @@ def read_reference(directory: str | Path, config: Any = None) -> MapState:
         raise pvt.error(6 * k, f"template id {ids[k]} out of order (expected {k})")
     t_pc = np.stack([pvt.floats(0, 6, n, c, "pose-cell coordinate") for c in (1, 2, 3)], 1)
     t_decay = pvt.floats(0, 6, n, 4, "decay")
-    pvt.lists(0, 6, n, 5, "experience list")
+    pvt_lists = pvt.lists(0, 6, n, 5, "experience list")
     pvt_tail = pvt.tail(pvt_end, blank_prev=True)
     scalars: dict[str, Any] = {"imported_from": "reference"}
     have_lvc = (d / LVC).is_file()
     if have_lvc:
-        lv = _File(d / LVC)
+        lv = file(LVC)
         if not lv.lines:
             raise lv.error(0, "unexpected end of file (TEMPLATE_SIZE)")
         size_v = lv.floats(0, 1, 1, 0, "TEMPLATE_SIZE")[0]
@@ -321,13 +337,13 @@ def read_reference(directory: str | Path, config: Any = None) -> MapState:
             ty, tx = 1, size
         if ty * tx != size:
             raise MapFormatError(
-                f"{d / LVC}, line 1: templates have {size} values but the config's "
+                f"{shown / LVC}, line 1: templates have {size} values but the config's "
                 f"template_x_size x template_y_size = {tx} x {ty} = {tx * ty}; use the "
                 "config the map was made with"
             )
         templates = np.array(data, dtype=np.float64).reshape(n, ty, tx)
     else:
-        log.warning("%s: %s is missing; the map loads without templates", d, LVC)
+        log.warning("%s: %s is missing; the map loads without templates", shown, LVC)
         cur_vt = _current(pvt, pvt_end + 1, pvt_tail[0], n, "current_vt")
         prev_vt = _current(pvt, pvt_end + 2, pvt_tail[1], n, "prev_vt")
         ty = int(flat.get("template_y_size", 1)) if flat else 1
@@ -336,12 +352,12 @@ def read_reference(directory: str | Path, config: Any = None) -> MapState:
         means = np.zeros(n)
         scalars[MISSING_KEY] = LVC
     # ---------------------------------------------------------------- experiences
-    pce = _File(d / PCE)
+    pce = file(PCE)
     m, pce_end = pce.records(0, 4, tail=True, what="experiences")
     e_pc = np.stack([pce.floats(0, 4, m, c, "pose-cell coordinate") for c in (0, 1, 2)], 1)
     pc_vt = pce.ids(0, 4, m, 3, "template id", -1, n)
     pce_tail = pce.tail(pce_end, blank_prev=True)
-    ex = _File(d / EXP)
+    ex = file(EXP)
     m_ex, ex_end = ex.records(0, 10, tail=True, what="experiences")
     if m_ex != m:
         raise ex.error(ex_end, f"{m_ex} experiences end here but {PCE} holds {m}")
@@ -363,6 +379,7 @@ def read_reference(directory: str | Path, config: Any = None) -> MapState:
     prev_exp = _current(ex, ex_end + 2, prev_exp, m, "prev_exp")
     if (pc_vt != exp_vt).any():
         extra["exp:pc_template"] = pc_vt
+    _warn_stale_lists(pvt, pvt_lists, exp_vt)
     # secondary tails that differ from what a write would give: kept verbatim
     for name, (_, _, t_cur, t_prev), (want_c, want_p), count in (
         (PVT, pvt_tail, (cur_vt, prev_vt), n),
@@ -372,7 +389,7 @@ def read_reference(directory: str | Path, config: Any = None) -> MapState:
         if (t_cur, t_prev) != written:
             scalars[f"{TAIL}{name}"] = f"{t_cur}\n{t_prev}"
     # ---------------------------------------------------------------- links
-    lk = _File(d / LINKS)
+    lk = file(LINKS)
     n_l, _ = lk.records(0, 6, tail=False, what="links")
     geo = [lk.floats(0, 6, n_l, c, w) for c, w in ((0, "d"), (1, "heading"), (2, "facing"))]
     to = lk.ids(0, 6, n_l, 3, "exp_to_id", 0, m)
@@ -384,7 +401,7 @@ def read_reference(directory: str | Path, config: Any = None) -> MapState:
         raise lk.error(6 * k + 3, f"link {k} joins experience {to[k]} to itself")
     # ---------------------------------------------------------------- goals
     if (d / GOAL_FILE).is_file():
-        gf = _File(d / GOAL_FILE)
+        gf = file(GOAL_FILE)
         if len(gf.lines) > 1 and any(s.strip() for s in gf.lines[1:]):
             raise gf.error(1, "expected the goal ids on one line")
         if gf.lines:
@@ -421,7 +438,179 @@ def read_reference(directory: str | Path, config: Any = None) -> MapState:
         extra=extra,
         scalars=scalars,
     )
-    return state.validate(source=str(d))
+    return state.validate(source=str(shown))
+
+
+def _open(directory: Path, shown: Path, name: str) -> _File:
+    return _File(directory / name, shown / name)
+
+
+def _warn_stale_lists(f: _File, lists: list[np.ndarray], exp_template: np.ndarray) -> None:
+    """Warn when templates' experience lists disagree with the experiences' template ids
+    (their merge leaves the partial map's lists behind); the map uses the ids."""
+    derived = _group_indices(exp_template, len(lists))
+    stale = [i for i, (a, b) in enumerate(zip(lists, derived)) if not np.array_equal(a, b)]
+    if stale:
+        i = stale[0]
+        log.warning(
+            "%s: %d template experience list(s) disagree with the experiences' template "
+            "ids (template %d lists %s, experiences.txt gives %s); the map uses the "
+            "experiences' ids, and writing it gives their lists",
+            f.path,
+            len(stale),
+            i,
+            _ids_text(lists[i]),
+            _ids_text(derived[i]),
+        )
+
+
+def _ids_text(values: np.ndarray, limit: int = 6) -> str:
+    """``[37]``, ``[1, 2]``, ``[]``: a list of ids for a message."""
+    v = [int(x) if float(x).is_integer() else float(x) for x in np.asarray(values)[:limit]]
+    more = f", ... ({np.asarray(values).size} values)" if np.asarray(values).size > limit else ""
+    return "[" + ", ".join(str(x) for x in v) + more + "]"
+
+
+# ------------------------------------------------------------------------ comparing
+LAYOUT: dict[str, tuple[int, int, str, tuple[str, ...]]] = {
+    LVC: (1, 3, "template", ("id", "mean", "data")),
+    PVT: (0, 6, "template", ("id", "pc_x", "pc_y", "pc_th", "decay", "experience list")),
+    PCE: (0, 4, "experience", ("x_pc", "y_pc", "th_pc", "vt_id")),
+    EXP: (
+        0,
+        10,
+        "experience",
+        (
+            "id",
+            "x",
+            "y",
+            "th",
+            "vt_id",
+            "links_from list",
+            "links_to list",
+            "time_from_current_s",
+            "goal_to_current",
+            "current_to_goal",
+        ),
+    ),
+    LINKS: (0, 6, "link", ("d", "heading", "facing", "exp_to_id", "exp_from_id", "delta_time")),
+    GOAL_FILE: (0, 1, "goals", ("goal list",)),
+}
+"""Per file: the first record's line, lines per record, what a record is, its fields."""
+DERIVED = {(PVT, "experience list"), (EXP, "links_from list"), (EXP, "links_to list")}
+"""The fields a write derives from the others (a stale list in a save is not kept)."""
+
+
+@dataclass(frozen=True)
+class FieldChange:
+    """One field of a reference-format file whose value differs between two versions.
+
+    Attributes:
+        file: the file name (``posecellvisual_templates.txt``).
+        field: the field (``experience list``, ``current id``, ``lines``).
+        text: the change in words (``posecellvisual_templates.txt, template 425:
+            experience list [37] -> [508]``).
+    """
+
+    file: str
+    field: str
+    text: str
+
+    @property
+    def derived(self) -> bool:
+        """True for a list a write derives from the other fields (see :data:`DERIVED`)."""
+        return (self.file, self.field) in DERIVED
+
+
+def _lines(text: str) -> list[str]:
+    lines = text.split("\n")
+    if lines[-1] == "":
+        lines.pop()
+    return lines
+
+
+def _same(a: str, b: str) -> bool:
+    """Two lines hold the same values (``10`` and ``10.0`` are the same id)."""
+    ta, tb = a.split(), b.split()
+    if len(ta) != len(tb):
+        return False
+    try:
+        return all(float(x) == float(y) for x, y in zip(ta, tb))
+    except ValueError:
+        return ta == tb
+
+
+def _shown(line: str, listed: bool) -> str:
+    tokens = line.split()
+    if not listed and len(tokens) == 1:
+        return tokens[0]
+    try:
+        return _ids_text(np.array([float(t) for t in tokens]))
+    except ValueError:
+        return repr(line.strip()[:40])
+
+
+def _where(name: str, lines: list[str], i: int) -> tuple[str, str]:
+    """``(record, field)`` of line ``i`` (0-based) of file ``name``."""
+    start, width, kind, fields = LAYOUT[name]
+    if i < start:
+        return "header", "TEMPLATE_SIZE"
+    heads = [s.strip() == "-" for s in lines[start::width]]
+    n = heads.index(True) if name not in (LINKS, GOAL_FILE) and True in heads else len(heads)
+    if i < start + n * width:
+        rec, col = divmod(i - start, width)
+        return (f"{kind} {rec}" if name != GOAL_FILE else kind), fields[col]
+    tail = ("the '-' line", "current id", "previous id")
+    k = i - start - n * width
+    return "tail", tail[k] if k < len(tail) else f"line {i + 1}"
+
+
+def compare_texts(before: dict[str, str], after: dict[str, str]) -> list[FieldChange]:
+    """Every field whose value differs between two versions of a reference-format save.
+
+    Args:
+        before, after: file name -> text (a file absent from one side is compared as
+            missing; an absent ``goal_list.txt`` equals an empty one).
+
+    Returns:
+        One :class:`FieldChange` per changed field, in file and line order.
+    """
+    out: list[FieldChange] = []
+    for name in (*FILES, GOAL_FILE):
+        a, b = before.get(name), after.get(name)
+        if name == GOAL_FILE:
+            a, b = a or "", b or ""
+        if a is None or b is None:
+            if (a is None) != (b is None):
+                state = "missing" if b is None else "added"
+                out.append(FieldChange(name, "file", f"{name}: the file is {state}"))
+            continue
+        la, lb = _lines(a), _lines(b)
+        if len(la) != len(lb):
+            out.append(FieldChange(name, "lines", f"{name}: {len(la)} lines -> {len(lb)} lines"))
+        for i in range(min(len(la), len(lb))):
+            if _same(la[i], lb[i]):
+                continue
+            where, field = _where(name, la, i)
+            listed = field.endswith("list") or field == "data"
+            out.append(
+                FieldChange(
+                    name,
+                    field,
+                    f"{name}, {where}: {field} {_shown(la[i], listed)} -> {_shown(lb[i], listed)}",
+                )
+            )
+    return out
+
+
+def read_texts(directory: str | Path) -> dict[str, str]:
+    """The reference-format files present in ``directory``, name -> text."""
+    d = Path(directory)
+    out = {}
+    for name in (*FILES, GOAL_FILE):
+        if (d / name).is_file():
+            out[name] = (d / name).read_bytes().decode("utf-8", errors="replace")
+    return out
 
 
 # ------------------------------------------------------------------------ writing

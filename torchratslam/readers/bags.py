@@ -199,9 +199,6 @@ def decode_image(msg: Any, msgtype: str, color: bool = False, topic: str = "imag
     return out if out.flags.writeable else out.copy()  # a view of the message's bytes
 
 
-_decode_image = decode_image  # the name the readers used before the move
-
-
 def _yaw(q: Any) -> float:
     return math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
 

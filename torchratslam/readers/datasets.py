@@ -7,7 +7,8 @@ visual odometry). Frames are read lazily, one at a time.
 
 * :class:`DirectoryReader` -- ``frames/`` (images in natural order of their file
   names: ``frame_2`` before ``frame_10``; names that differ only in leading zeros are
-  refused as ambiguous; the order is logged),
+  refused as ambiguous; the order is logged; gaps and repeats in the frame numbers
+  are warnings, kept in ``input_warnings``),
   ``odometry.csv`` (header with ``t``, ``vtrans`` m/s, ``vrot`` rad/s; row k is the
   velocity over the interval that ends at row k's ``t``; other columns are ignored),
   optional ``groundtruth.csv`` (``t, x, y, theta``), optional ``meta.json`` (its
@@ -54,6 +55,7 @@ __all__ = [
     "VideoReader",
     "check_odometry",
     "check_time_bases",
+    "frame_numbering",
     "natural_key",
     "open_data",
     "read_groundtruth_csv",
@@ -77,7 +79,7 @@ def _read_csv_columns(path: Path, required: tuple[str, ...]) -> dict[str, np.nda
     if path.stat().st_size > _CSV_MAX_BYTES:
         raise InputError(f"{path}: {path.stat().st_size} bytes is too large for a CSV table")
     try:
-        with path.open(newline="") as fh:
+        with path.open(newline="", encoding="utf-8-sig") as fh:  # a spreadsheet's BOM
             rows = list(
                 csv.reader(line for line in fh if line.strip() and not line.startswith("#"))
             )
@@ -240,6 +242,67 @@ def natural_sort(files: list[Path], where: str) -> list[Path]:
     return out
 
 
+def _span(a: int, b: int) -> str:
+    return str(a) if a == b else f"{a}..{b}"
+
+
+def frame_numbering(names: list[str], where: str) -> tuple[str, ...]:
+    """Gaps and repeats in the frame numbers of image names in reading order.
+
+    The frame number of a name is its last run of digits that is not the same in every
+    name (``cam2_000031.png``: 31). The usual step between two
+    names is the most common difference; a larger one is a gap (frames missing, or
+    renamed to later numbers, so every later image meets another row of the odometry),
+    a zero or negative one a repeat. Names without digits are not checked.
+
+    Args:
+        names: the file names, in the order they are read.
+        where: the folder named in the messages.
+
+    Returns:
+        One message per kind of problem (empty when the numbering is regular).
+    """
+    runs = [_DIGITS.findall(Path(n).stem) for n in names]
+    width = len(runs[0]) if runs else 0
+    if len(names) < 2 or not width or any(len(r) != width for r in runs):
+        return ()
+    table = np.array([[int(v) for v in r] for r in runs], dtype=np.int64)
+    varying = np.flatnonzero((table != table[0]).any(axis=0))
+    nums = table[:, varying[-1] if varying.size else width - 1]
+    diff = np.diff(nums)
+    positive = diff[diff > 0]
+    if not positive.size:
+        step = 1
+    else:
+        values, counts = np.unique(positive, return_counts=True)
+        step = int(values[np.argmax(counts)])
+    out = []
+    gaps = np.flatnonzero(diff > step)
+    if gaps.size:
+        shown = ", ".join(
+            f"{_span(int(nums[i]) + step, int(nums[i + 1]) - step)} "
+            f"({names[i]}, then {names[i + 1]})"
+            for i in gaps[:3]
+        )
+        more = f" and {gaps.size - 3} more" if gaps.size > 3 else ""
+        out.append(
+            f"{where}: the frame numbers skip {shown}{more}; the images are read in name "
+            "order, one odometry row each, so a missing or renamed image shifts every later "
+            "frame against its odometry; check the numbering"
+        )
+    repeats = np.flatnonzero(diff <= 0)
+    if repeats.size:
+        shown = ", ".join(f"{names[i]} and {names[i + 1]}" for i in repeats[:3])
+        more = f" and {repeats.size - 3} more" if repeats.size > 3 else ""
+        out.append(
+            f"{where}: frame numbers repeat or go back ({shown}{more}); the images are read "
+            "in name order, one odometry row each; check that every image is one frame"
+        )
+    for message in out:
+        log.warning("%s", message)
+    return tuple(out)
+
+
 def read_groundtruth_csv(path: str | Path) -> np.ndarray:
     """Read a ground-truth CSV with columns ``t, x, y, theta`` into ``(T, 4)`` float64."""
     c = _read_csv_columns(Path(path), ("t", "x", "y", "theta"))
@@ -291,6 +354,9 @@ class Reader:
     has_odometry: bool = True
     mirrored: bool = False
     """True when image columns turn counter-clockwise (the simulator's panoramas)."""
+    input_warnings: tuple[str, ...] = ()
+    """What looked wrong in the input but did not stop it (e.g. gaps in the frame
+    numbers), one message each; a run records them in its metrics."""
 
     def frames(self) -> Iterator[Frame]:  # pragma: no cover - abstract
         raise NotImplementedError
@@ -362,6 +428,7 @@ class DirectoryReader(Reader):
         if not files:
             raise InputError(f"{fdir}: no images ({', '.join(IMAGE_EXTENSIONS)})")
         self.files = natural_sort(files, str(fdir))
+        self.input_warnings = frame_numbering([f.name for f in self.files], str(fdir))
         self.color = color
         odo = Path(odometry) if odometry is not None else self.path / "odometry.csv"
         if odo.is_file() or odometry is not None:
@@ -399,11 +466,20 @@ class DirectoryReader(Reader):
 
     def _images(self) -> Iterator[np.ndarray]:
         flag = cv2.IMREAD_COLOR if self.color else cv2.IMREAD_GRAYSCALE
+        first: tuple[Path, tuple[int, ...]] | None = None
         for f in self.files:
             img = cv2.imread(str(f), flag)
             if img is None:
                 raise InputError(
                     f"{f}: unreadable image (corrupt or not an image); replace or remove it"
+                )
+            if first is None:
+                first = (f, img.shape)
+            elif img.shape[:2] != first[1][:2]:
+                raise InputError(
+                    f"{f}: {img.shape[1]} x {img.shape[0]} pixels, but {first[0].name} and "
+                    f"the frames after it are {first[1][1]} x {first[1][0]}; every frame of "
+                    "a dataset must come from one camera at one size (resize or remove it)"
                 )
             yield img
 
@@ -509,18 +585,6 @@ class VideoReader(Reader):
 
 
 # ----------------------------------------------------------------------------- ROS bags
-_BAG_NAMES = ("BagReader", "_decode_image", "_interval_means", "_stamp", "_yaw")
-
-
-def __getattr__(name: str) -> Any:
-    """The bag reader moved to :mod:`torchratslam.readers.bags` (which imports this module)."""
-    if name in _BAG_NAMES:
-        from torchratslam.readers import bags
-
-        return getattr(bags, name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-
-
 # ----------------------------------------------------------------------------- dispatch
 def open_data(
     spec: str | Path,

@@ -1,5 +1,9 @@
 """Run a sweep: expand it, skip finished runs when resuming, execute the rest, write
-the results table after every finished unit, then the figures."""
+the results table after every finished unit, then the figures.
+
+A sweep never drops results it did not make again: an out folder whose table holds a
+stopped sweep (some of this sweep's runs) or another sweep's runs is refused unless
+``resume`` (keep them, run the others) or ``overwrite`` (start again) is given."""
 
 from __future__ import annotations
 
@@ -93,6 +97,32 @@ class Progress:
             self.bar.close()
 
 
+def _check_replaceable(table: Path, runs: list[RunSpec]) -> None:
+    """A table may be replaced without ``overwrite`` only when it holds this very sweep,
+    finished.
+
+    Raises:
+        InputError: it holds a stopped sweep, another sweep's runs, or is no table.
+    """
+    try:
+        rows = read_table(table)
+    except InputError as exc:
+        raise InputError(f"{exc}; refusing to replace it: choose another out folder") from None
+    wanted = {r.run_id for r in runs}
+    have = {str(row.get("run_id")) for row in rows}
+    if have - wanted:
+        raise InputError(
+            f"{table} holds {len(have - wanted)} runs of another sweep; choose another out "
+            "folder, or start again with --overwrite (overwrite=True) to replace it"
+        )
+    if len(have) < len(wanted):
+        raise InputError(
+            f"{table} holds {len(have)} of this sweep's {len(wanted)} runs (a stopped "
+            "sweep); continue it with --resume (resume=True), or start again with "
+            "--overwrite (overwrite=True)"
+        )
+
+
 def _spec(sweep_file: str | Path | SweepSpec | Mapping[str, Any]) -> SweepSpec:
     if isinstance(sweep_file, SweepSpec):
         return sweep_file
@@ -112,8 +142,9 @@ def sweep(
     retry_failed: bool = False,
     batch: bool | None = None,
     figures: bool = True,
-    progress: bool = True,
+    progress: bool = False,
     executor: Executor | None = None,
+    overwrite: bool = False,
 ) -> Any:
     """Run every combination of a sweep and return the results table.
 
@@ -130,15 +161,19 @@ def sweep(
         batch: share a batched pose-cell network where possible (default: the file's
             ``batch``, true unless set).
         figures: draw the figures into ``out/figures``.
-        progress: show the progress bar.
+        progress: show the progress bar (one bar, labelled ``sweep``).
         executor: a ready executor (overrides workers / ray).
+        overwrite: start again in an ``out`` whose table holds a stopped sweep or
+            another sweep's runs (replacing ``results.csv``, nothing else).
 
     Returns:
         A pandas DataFrame when pandas is installed, else a list of dicts: one row per
         run in the sweep's order, columns of :func:`torchratslam.sweeps.table.columns`.
 
     Raises:
-        InputError, ConfigError: a bad sweep file, or ``resume`` with an unreadable table.
+        InputError, ConfigError: a bad sweep file, ``resume`` with an unreadable table,
+            or (without ``resume`` or ``overwrite``) a table in ``out`` holding a stopped
+            sweep or another sweep's runs.
     """
     spec = _spec(sweep_file)
     runs = spec.runs()
@@ -158,8 +193,9 @@ def sweep(
                 row["index"] = wanted[rid].index
                 rows[rid] = row
         log.info("resuming: %d of %d runs already finished", len(rows), len(runs))
-    elif table is not None and table.exists() and not resume:
-        log.info("%s exists; it will be replaced (use resume to keep its runs)", table)
+    elif table is not None and table.exists() and not overwrite:
+        _check_replaceable(table, runs)
+        log.info("%s holds this sweep's finished runs; running them again", table)
     todo = [r for r in runs if r.run_id not in rows]
     own_executor = executor is None
     if executor is None:

@@ -190,7 +190,7 @@ def tune(
     workers: int | None = None,
     ray: bool = False,
     ray_address: str | None = None,
-    progress: bool = True,
+    progress: bool = False,
     executor: Executor | None = None,
 ) -> dict[str, Any]:
     """Search ``params`` within their ranges to minimise ``metric`` (module docstring).

@@ -143,6 +143,26 @@ def test_run_on_a_written_dataset_directory(tmp_path, small_run, capsys):
     assert m["frames"] == 12 and m["odometry"] == "visual"
 
 
+def test_a_gap_in_the_frame_numbering_is_recorded_in_the_metrics(tmp_path, small_run):
+    from torchratslam.sim import open_sim, write_dataset
+
+    data = write_dataset(open_sim("sim:loop?laps=0.2&frames=12"), tmp_path / "ds")
+    frames = sorted((data / "frames").iterdir())
+    last = frames[-1]
+    last.rename(
+        last.with_name(last.name.replace(last.stem, f"{int(last.stem) + 40:0{len(last.stem)}d}"))
+    )
+    out = tmp_path / "out"
+    argv = ["run", "--config", str(small_run.config), "--data", str(data), "--out", str(out)]
+    assert main([*argv, "--no-progress"]) == 0
+    warnings = json.loads((out / "metrics.json").read_text())["input_warnings"]
+    assert len(warnings) == 1 and "gap" in warnings[0], warnings
+    clean = write_dataset(open_sim("sim:loop?laps=0.2&frames=12"), tmp_path / "clean")
+    argv = ["run", "--config", str(small_run.config), "--data", str(clean), "--no-progress"]
+    assert main([*argv, "--out", str(tmp_path / "out2")]) == 0
+    assert "input_warnings" not in json.loads((tmp_path / "out2" / "metrics.json").read_text())
+
+
 def test_run_with_load_merges_into_the_stored_map(small_run, tmp_path):
     pytest.importorskip("torchratslam.multisession.session")
     out, cfg = small_run.out, small_run.config
@@ -198,3 +218,14 @@ def test_every_subcommand_help_has_examples_and_no_sphinx_markup():
         for action in sub._actions:
             if action.dest != "help":
                 assert action.help and "e.g." in action.help, (name, action.option_strings)
+
+
+def test_multisession_refuses_an_out_holding_a_run_that_did_not_finish(tmp_path, capsys):
+    out = tmp_path / "ms"
+    out.mkdir()
+    (out / "running.json").write_text('{"command": ["torchratslam", "multisession"]}')
+    argv = ["multisession", "--tour", "sim:virtual_tour", "--out", str(out), "--max-frames", "5"]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert "did not finish" in err and "--overwrite" in err
+    assert sorted(p.name for p in out.iterdir()) == ["running.json"]

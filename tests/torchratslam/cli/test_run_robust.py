@@ -18,6 +18,7 @@ import numpy as np
 import pytest
 import torch
 
+from ratslam_graph.atomic import LOCK_NAME as LOCK
 from torchratslam.cli import main
 from torchratslam.maps.native import load_map, load_state, read_map_info
 
@@ -331,3 +332,44 @@ def test_a_run_killed_during_a_checkpoint_resumes_to_the_uninterrupted_map(setup
     assert info["partial"] and info["stopped_at_frame"] in (10, 20)
     assert main(["run", "--resume", str(out), "--no-progress"]) == 0
     _same_run(full, out)
+
+
+def test_a_plain_re_run_refuses_an_out_holding_a_stopped_run(setup, tmp_path, capsys):
+    """Re-running the command of a stopped run refuses in one line and points to
+    --resume; --overwrite starts again, replacing only torchratslam's own files."""
+    _, cfg, data, full = setup
+    ds = _copy_data(data, tmp_path / "ds")
+    good = (ds / "frames" / "000021.png").read_bytes()
+    (ds / "frames" / "000021.png").write_bytes(b"not a png")
+    out = tmp_path / "out"
+    assert main(_argv(cfg, ds, out)) == 2
+    (out / "notes.txt").write_text("mine")
+    (ds / "frames" / "000021.png").write_bytes(good)
+
+    def files():
+        return {p.name: p.read_bytes() for p in out.iterdir() if p.is_file() and p.name != LOCK}
+
+    before = files()
+    capsys.readouterr()
+    assert main(_argv(cfg, ds, out)) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 2 and "holds a run that stopped at frame 21" in err[0]
+    assert f"torchratslam run --resume {out}" in err[0] and "--overwrite" in err[0]
+    assert files() == before  # the lock file aside, nothing changed
+    assert read_map_info(out / "state")["stopped_at_frame"] == 21
+    assert main([*_argv(cfg, ds, out), "--overwrite"]) == 0
+    _same_run(full, out)
+    assert (out / "notes.txt").read_text() == "mine"
+    assert main(["run", "--resume", str(out), "--overwrite"]) == 2  # not both
+
+
+def test_run_help_says_what_run_does_and_shows_the_required_options(capsys):
+    with pytest.raises(SystemExit):
+        main(["run", "--help"])
+    text = capsys.readouterr().out
+    usage = text.split("\n\n")[0]
+    assert "--config CONFIG --data DATA --out OUT" in usage and "[--config" not in usage
+    assert "--resume OUT" in usage
+    assert "files in it are replaced" not in text
+    assert "replaces only the files it wrote" in " ".join(text.split())
+    assert "every 1000 frames" in " ".join(text.split())

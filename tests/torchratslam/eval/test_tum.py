@@ -46,6 +46,15 @@ def test_write_read_round_trip_is_lossless(tmp_path):
         read_tum(tmp_path / "bad.txt")
 
 
+def test_a_file_that_cannot_be_written_is_named_not_its_temporary(tmp_path):
+    (tmp_path / "a_file").write_text("")
+    target = tmp_path / "a_file" / "tum.txt"  # its folder is a file
+    with pytest.raises(InputError) as err:
+        write_tum(target, np.array([1.0]), np.zeros((1, 3)))
+    assert str(err.value).startswith(f"{target}: cannot be written")
+    assert "tmp" not in str(err.value).replace(str(tmp_path), "")
+
+
 def test_tum_ate_associates_by_timestamp(tmp_path):
     # the estimate covers every other ground-truth stamp, 1 ms late; a rigid motion apart
     t = np.arange(40) * 0.1
@@ -127,6 +136,7 @@ def tum_run(tmp_path_factory):
 
 
 def _evo_ate(gt: Path, est: Path) -> float:
+    pytest.importorskip("evo", reason="evo (the 'evo' extra) is not installed")
     from evo.core import metrics, sync
     from evo.tools import file_interface
 

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from torchratslam.errors import InputError
+from torchratslam.readers.bags import BagReader
 from torchratslam.readers.datasets import (
-    BagReader,
     DirectoryReader,
     VideoReader,
     open_data,
@@ -240,7 +240,7 @@ def test_bag_reader_errors(tmp_path):
 def test_raw_image_encodings_decode_to_grey_or_bgr():
     from types import SimpleNamespace
 
-    from torchratslam.readers.datasets import _decode_image
+    from torchratslam.readers.bags import decode_image
 
     rng = np.random.default_rng(5)
     bgr = (rng.random((5, 7, 3)) * 255).astype(np.uint8)
@@ -251,11 +251,67 @@ def test_raw_image_encodings_decode_to_grey_or_bgr():
         return SimpleNamespace(encoding=enc, height=5, width=7, step=step, data=data.ravel())
 
     t = "sensor_msgs/msg/Image"
-    assert np.array_equal(_decode_image(msg("bgr8", padded, 24), t, True, "/c"), bgr)
-    assert np.array_equal(_decode_image(msg("bgr8", padded, 24), t, False, "/c"), grey)
+    assert np.array_equal(decode_image(msg("bgr8", padded, 24), t, True, "/c"), bgr)
+    assert np.array_equal(decode_image(msg("bgr8", padded, 24), t, False, "/c"), grey)
     rgb = bgr[:, :, ::-1].reshape(5, 21)
-    assert np.array_equal(_decode_image(msg("rgb8", rgb, 21), t, True, "/c"), bgr)
+    assert np.array_equal(decode_image(msg("rgb8", rgb, 21), t, True, "/c"), bgr)
     with pytest.raises(InputError, match="not supported"):
-        _decode_image(msg("32FC1", padded, 24), t, False, "/c")
+        decode_image(msg("32FC1", padded, 24), t, False, "/c")
     with pytest.raises(InputError, match="shorter"):
-        _decode_image(msg("mono8", padded[:2], 24), t, False, "/c")
+        decode_image(msg("mono8", padded[:2], 24), t, False, "/c")
+
+
+# ------------------------------------------------------------------ rough input
+def test_a_renamed_frame_is_a_gap_that_warns_and_is_kept(tmp_path, caplog):
+    _write_dir(tmp_path / "d")
+    assert open_data(tmp_path / "d").input_warnings == ()
+    frames = tmp_path / "d" / "frames"
+    (frames / "00002.png").rename(frames / "00009.png")  # counts still equal
+    with caplog.at_level("WARNING", logger="torchratslam.readers"):
+        r = open_data(tmp_path / "d")
+    assert [f.name for f in r.files][-1] == "00009.png"  # read last: after 00005.png
+    (msg,) = r.input_warnings
+    assert "skip 2 (00001.png, then 00003.png)" in msg and "6..8 (00005.png, then 00009.png)" in msg
+    assert str(frames) in msg and msg in caplog.text
+
+
+@pytest.mark.parametrize(
+    ("names", "problem"),
+    [
+        (["a_0.png", "a_5.png", "a_10.png", "a_15.png"], None),  # a regular step of 5
+        (["cam2_0.png", "cam2_1.png", "cam2_2.png"], None),  # the varying number counts
+        (["0.png", "5.png", "10.png", "20.png"], "skip 15 (10.png, then 20.png)"),
+        (["1.png", "2.png", "2.jpg", "3.png"], "repeat or go back (2.png and 2.jpg)"),
+        (["a_7.png", "b_1.png", "b_2.png", "b_3.png"], "repeat or go back (a_7.png and b_1.png)"),
+        (["first.png", "second.png"], None),  # no numbers: nothing to check
+    ],
+)
+def test_frame_numbering_against_a_brute_force_reading(names, problem):
+    from torchratslam.readers.datasets import frame_numbering
+
+    got = frame_numbering(names, "frames")
+    assert (got == ()) == (problem is None)
+    if problem is not None:
+        assert any(problem in m for m in got), got
+
+
+def test_an_odometry_csv_with_a_byte_order_mark_is_read(tmp_path):
+    _write_dir(tmp_path / "d")
+    odo = tmp_path / "d" / "odometry.csv"
+    plain = read_odometry_csv(odo)
+    odo.write_bytes(b"\xef\xbb\xbf" + odo.read_bytes())  # as spreadsheets save it
+    for a, b in zip(read_odometry_csv(odo), plain, strict=True):
+        assert np.array_equal(a, b)
+    assert len(list(open_data(tmp_path / "d"))) == N
+
+
+def test_a_frame_of_another_size_is_named(tmp_path):
+    _write_dir(tmp_path / "d")
+    odd = tmp_path / "d" / "frames" / "00003.png"
+    cv2.imwrite(str(odd), np.zeros((6, 10), np.uint8))
+    r = open_data(tmp_path / "d")
+    with pytest.raises(InputError) as err:
+        list(r)
+    msg = str(err.value)
+    assert msg.startswith(f"{odd}: 10 x 6 pixels, but 00000.png") and "20 x 12" in msg
+    assert "LocalView" not in msg

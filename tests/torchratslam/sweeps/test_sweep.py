@@ -12,6 +12,8 @@ import pytest
 import yaml
 
 import torchratslam
+from torchratslam.cli import main
+from torchratslam.errors import InputError
 from torchratslam.sweeps.table import deterministic_text, read_table
 
 ROOT = Path(__file__).resolve().parents[3]
@@ -110,7 +112,7 @@ def test_local_pool_and_ray_give_the_same_table(sweep_file, reference, tmp_path)
     assert deterministic_text(tmp_path / "pool" / "results.csv") == expected
     rows = read_table(tmp_path / "pool" / "results.csv")
     assert max(r["batch"] for r in rows) > 1  # some runs shared a batched network
-    pytest.importorskip("ray")
+    pytest.importorskip("ray", reason="ray (the 'ray' extra) is not installed")
     torchratslam.sweep(
         sweep_file, tmp_path / "ray", ray=True, workers=2, figures=False, progress=False
     )
@@ -151,6 +153,11 @@ def test_kill_then_resume_equals_uninterrupted(sweep_file, reference, tmp_path):
         proc.wait()
     partial = read_table(table)
     assert 3 <= len(partial) < 12
+    # a plain re-run refuses (one line, pointing to --resume) and leaves the table alone
+    before = table.read_bytes()
+    argv = ["sweep", str(sweep_file), "--out", str(out), "--workers", "1", "--no-progress"]
+    assert main(argv) == 2
+    assert table.read_bytes() == before
     torchratslam.sweep(sweep_file, out, resume=True, workers=1, figures=False, progress=False)
     assert deterministic_text(table) == deterministic_text(ref_out / "results.csv")
     final = {r["run_id"]: r for r in read_table(table)}
@@ -180,3 +187,18 @@ def test_failed_run_is_recorded_and_the_sweep_goes_on(tmp_path):
     # resume keeps failed runs unless asked to retry them
     again = torchratslam.sweep(raw, tmp_path, resume=True, workers=1, progress=False, figures=False)
     assert len(again) == 4
+    # the finished sweep may run again; a stopped one (2 of 4 rows) or another sweep's
+    # table is refused unless resumed or overwritten
+    kw = {"workers": 1, "progress": False, "figures": False}
+    assert len(torchratslam.sweep(raw, tmp_path, **kw)) == 4
+    table = tmp_path / "results.csv"
+    lines = table.read_text().splitlines(keepends=True)
+    table.write_text("".join(lines[:3]))
+    with pytest.raises(InputError, match=r"holds 2 of this sweep's 4 runs .*--resume"):
+        torchratslam.sweep(raw, tmp_path, **kw)
+    assert table.read_text() == "".join(lines[:3])
+    other = {**raw, "parameters": {"exp_loops": [3]}}
+    with pytest.raises(InputError, match="runs of another sweep"):
+        torchratslam.sweep(other, tmp_path, **kw)
+    assert len(torchratslam.sweep(raw, tmp_path, overwrite=True, **kw)) == 4
+    assert len(read_table(table)) == 4

@@ -8,7 +8,7 @@ from torchratslam.config import load_config
 from torchratslam.errors import ConfigError, InputError
 from torchratslam.sweeps.tune import parse_range
 
-optuna = pytest.importorskip("optuna")
+optuna = pytest.importorskip("optuna", reason="optuna (the 'tune' extra) is not installed")
 from torchratslam.sweeps import tune  # noqa: E402
 
 DATA = "sim:loop?laps=1&frames=20&lasers=0"
