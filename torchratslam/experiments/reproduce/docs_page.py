@@ -21,25 +21,11 @@ from typing import Any
 
 from ratslam_graph.atomic import atomic_write_text
 from torchratslam.errors import InputError
-from torchratslam.experiments.reproduce.report import PAPERS
+from torchratslam.experiments.reproduce.report import PAPERS, format_cell
 
 __all__ = ["main", "write_page"]
 
 REGENERATE = "python -m torchratslam.experiments.reproduce.docs_page --run --quick --out out/papers"
-
-
-def _cell(value: Any, unit: str) -> str:
-    if value is None:
-        return "–"
-    if isinstance(value, bool):
-        return "yes" if value else "no"
-    if isinstance(value, float):
-        text = f"{value:.4g}" if abs(value) < 1e4 else f"{value:.0f}"
-    else:
-        text = str(value)
-    if not unit:
-        return text
-    return text + unit if unit == "%" else f"{text} {unit}"
 
 
 def _experiment(rep: dict[str, Any], folder: Path, img: Path, seconds: float) -> list[str]:
@@ -51,7 +37,8 @@ def _experiment(rep: dict[str, Any], folder: Path, img: Path, seconds: float) ->
     lines += ["| | paper | ours |", "|---|---|---|"]
     for r in rep["rows"]:
         unit = r.get("unit", "")
-        lines.append(f"| {r['name']} | {_cell(r['paper'], unit)} | {_cell(r['ours'], unit)} |")
+        paper, ours = format_cell(r["paper"], unit), format_cell(r["ours"], unit)
+        lines.append(f"| {r['name']} | {paper} | {ours} |")
     if rep.get("differences"):
         lines += ["", "What differs and why:", ""]
         lines += [f"- {d}" for d in rep["differences"]]

@@ -19,7 +19,15 @@ from typing import Any
 from ratslam_graph.atomic import atomic_write_text
 from torchratslam.errors import InputError
 
-__all__ = ["PAPERS", "Experiment", "ExperimentContext", "Report", "Row", "write_report"]
+__all__ = [
+    "PAPERS",
+    "Experiment",
+    "ExperimentContext",
+    "Report",
+    "Row",
+    "format_cell",
+    "write_report",
+]
 
 PAPERS: Mapping[str, str] = {
     "multisession": "Multi-session mapping with RatSLAM (the multisession paper)",
@@ -131,7 +139,8 @@ def _plain(value: Any) -> Any:
     return value
 
 
-def _cell(value: Any, unit: str) -> str:
+def format_cell(value: Any, unit: str) -> str:
+    """A table cell: a number to four significant digits with its unit, yes/no, or a dash."""
     if value is None:
         return "–"
     if isinstance(value, bool):
@@ -156,7 +165,8 @@ def report_markdown(report: Report) -> str:
         "|---|---|---|",
     ]
     lines += [
-        f"| {r.name} | {_cell(r.paper, r.unit)} | {_cell(r.ours, r.unit)} |" for r in report.rows
+        f"| {r.name} | {format_cell(r.paper, r.unit)} | {format_cell(r.ours, r.unit)} |"
+        for r in report.rows
     ]
     if report.differences:
         lines += ["", "What differs and why:", ""]
