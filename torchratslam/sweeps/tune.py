@@ -228,7 +228,6 @@ def tune(
         ConfigError: Optuna missing, bad ranges, unknown keys or metric.
         InputError: an existing study without ``resume``.
     """
-    optuna = _optuna()
     datasets = [data] if isinstance(data, str) else list(data)
     if not datasets:
         raise ConfigError("tune: give at least one dataset, e.g. sim:loop")
@@ -246,6 +245,7 @@ def tune(
                 base.replace(**{r.key: v})
             except ConfigError as exc:
                 raise ConfigError(f"tune: {r.key}={v!r}: {exc}") from None
+    optuna = _optuna()  # after the arguments: bad input is reported first
     out_dir = Path(out) if out is not None else None
     if out_dir is not None:
         out_dir.mkdir(parents=True, exist_ok=True)
