@@ -129,10 +129,9 @@ class ExperienceGraph:
         self._dirty_edges: set[int] = set()  # links whose graph attributes are stale
         self._dirty_nodes: set[int] = set()  # experiences whose graph attributes are stale
         self._poses_dirty = False
-        self._order: np.ndarray | None = None
         self._links_version = 0  # bumped by every change of the links
-        # (links version, reference links): the links in OpenRatSLAM's order
-        self._ref_links: tuple[int, relaxation.ReferenceLinks] | None = None
+        # (links version, the links in OpenRatSLAM's order)
+        self._ref: tuple[int, relaxation.ReferenceOrder] | None = None
 
     def __len__(self) -> int:
         return self.n
@@ -314,14 +313,12 @@ class ExperienceGraph:
         self._g.add_edge(src, dst)  # its attributes are written when the graph is read
         self._dirty_edges.add(k)
         # keep the cached reference order current when it was current before the link
-        cached, order = self._ref_links, self._order
-        if cached is None or order is None or cached[0] != before or len(order) != k:
-            self._order = None
+        cached = self._ref
+        if cached is None or cached[0] != before or cached[1].n != k:
+            self._ref = None
         else:
-            self._order, ref = relaxation.insert_reference_link(
-                order, cached[1], k, src, dst, self.link[k, :3]
-            )
-            self._ref_links = (self._links_version, ref)
+            cached[1].insert(k, src, dst, self.link[k])
+            self._ref = (self._links_version, cached[1])
         return True
 
     def remove_link(self, src: int, dst: int) -> None:
@@ -340,7 +337,7 @@ class ExperienceGraph:
         self._links_version += 1
         s, d = self.src[: self.e].tolist(), self.dst[: self.e].tolist()
         self._eidx = {(a, b): i for i, (a, b) in enumerate(zip(s, d))}
-        self._order = None
+        self._ref = None
 
     def count_transition(self, src: int, dst: int, behaviour: int, threshold: float) -> None:
         """Count a transition for Eq. 9 and delete links whose confidence fell too low.
@@ -386,7 +383,7 @@ class ExperienceGraph:
         if order == "reference":
             src, dst, _ = self.reference_links()
             edges = np.stack([src, dst], axis=1)
-            meas = self.meas[:e][self._order]
+            meas = self.meas[:e][self._reference().order]
         elif order == "creation":
             edges = np.stack([self.src[:e], self.dst[:e]], axis=1)
             meas = self.meas[:e]
@@ -397,18 +394,19 @@ class ExperienceGraph:
     def reference_links(self) -> relaxation.ReferenceLinks:
         """Link sources, targets and ``(d, heading, facing)`` in OpenRatSLAM's order
         (:func:`ratslam_graph.relaxation.reference_order`; cached, kept current as links
-        are added). Treat them as read-only.
+        are added): read-only views, valid until the next change of the links.
 
         Shape:
             Returns (E,), (E,), (E, 3).
         """
-        cached = self._ref_links
-        if cached is None or cached[0] != self._links_version or len(cached[1][0]) != self.e:
+        return self._reference().links
+
+    def _reference(self) -> relaxation.ReferenceOrder:
+        cached = self._ref
+        if cached is None or cached[0] != self._links_version or cached[1].n != self.e:
             e = self.e
-            if self._order is None or len(self._order) != e:
-                self._order = relaxation.reference_order(self.src[:e])
-            ref = relaxation.reference_links(self.src[:e], self.dst[:e], self.link[:e], self._order)
-            cached = self._ref_links = (self._links_version, ref)
+            ref = relaxation.ReferenceOrder(self.src[:e], self.dst[:e], self.link[:e])
+            cached = self._ref = (self._links_version, ref)
         return cached[1]
 
     def links(self) -> dict[str, np.ndarray]:

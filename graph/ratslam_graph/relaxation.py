@@ -5,7 +5,7 @@
 * ``exp_backend="alpha"`` with ``exp_relax_order="openratslam"`` (the defaults):
   :func:`sweep_in_place`, OpenRatSLAM's ``iterate()`` compiled, in place on the map's own
   arrays, the links in its order (:func:`reference_order`, kept current link after link
-  by :func:`insert_reference_link`), its arithmetic. A pass that changes nothing ends the
+  by :class:`ReferenceOrder`), its arithmetic. A pass that changes nothing ends the
   relaxation and later calls are skipped until poses or links change (exact: the result
   is bit-identical to running every pass). With ``exp_relax_budget`` a relaxation makes
   at most that many link updates, going on round the links where the previous one
@@ -36,7 +36,7 @@ from ratslam_graph.posegraph import PoseGraph
 from ratslam_graph.protocols import RelaxationBackend
 
 __all__ = [
-    "insert_reference_link",
+    "ReferenceOrder",
     "make_map_backend",
     "reference_links",
     "reference_order",
@@ -88,35 +88,66 @@ def reference_links(
     )
 
 
-def insert_reference_link(
-    order: np.ndarray,
-    ref: ReferenceLinks,
-    k: int,
-    src: int,
-    dst: int,
-    link: np.ndarray,
-) -> tuple[np.ndarray, ReferenceLinks]:
-    """Insert new link ``k`` into the reference order without sorting again.
-
-    The link goes after every link of a source ``<= src`` (creation order within a
-    source): O(E) copies, no sort.
+class ReferenceOrder:
+    """The links in OpenRatSLAM's order (:func:`reference_order`), kept current link
+    after link in buffers with spare room: a new link is inserted after every link of a
+    source ``<= src`` (creation order within a source) by moving the tail one row, no
+    sort and no Python loop over links.
 
     Args:
-        order: the reference order of the links before ``k``.
-        ref: :func:`reference_links` of the links before ``k``.
-        k: the new link's row.
-        src, dst: its ends.
-        link: its ``(d, heading, facing)``.
+        src, dst: the links' ends (creation order).
+        link: the links' ``[d, heading, facing, ...]``.
 
-    Returns:
-        The order and reference links with link ``k`` in place.
+    Shape:
+        src, dst: (E,); link: (E, >=3).
     """
-    at = int(np.searchsorted(ref[0], src, side="right"))
-    return np.insert(order, at, k), (
-        np.insert(ref[0], at, src),
-        np.insert(ref[1], at, dst),
-        np.insert(ref[2], at, link, axis=0),
-    )
+
+    def __init__(self, src: np.ndarray, dst: np.ndarray, link: np.ndarray) -> None:
+        order = reference_order(src)
+        ref = reference_links(src, dst, link, order)
+        self.n = len(order)
+        self._bufs: list[np.ndarray] = [order, *ref]
+
+    @property
+    def order(self) -> np.ndarray:
+        """Indices of the links (creation rows) in OpenRatSLAM's order.
+
+        Shape:
+            (E,) int64.
+        """
+        return self._bufs[0][: self.n]
+
+    @property
+    def links(self) -> ReferenceLinks:
+        """Sources, targets and ``(d, heading, facing)`` in that order: views, valid until
+        the next :meth:`insert`.
+
+        Shape:
+            (E,), (E,), (E, 3).
+        """
+        n = self.n
+        return self._bufs[1][:n], self._bufs[2][:n], self._bufs[3][:n]
+
+    def insert(self, k: int, src: int, dst: int, link: np.ndarray) -> None:
+        """Insert link ``k`` (the newest) with ends ``src``, ``dst`` and ``link[:3]``.
+
+        Shape:
+            link: (>=3,).
+        """
+        n = self.n
+        if n == len(self._bufs[0]):
+            cap = max(16, 2 * n)
+            grown = []
+            for a in self._bufs:
+                b = np.zeros((cap, *a.shape[1:]), dtype=a.dtype)
+                b[:n] = a[:n]
+                grown.append(b)
+            self._bufs = grown
+        at = int(np.searchsorted(self._bufs[1][:n], src, side="right"))
+        for a, value in zip(self._bufs, (k, src, dst, link[:3]), strict=True):
+            a[at + 1 : n + 1] = a[at:n]  # numpy moves overlapping rows correctly
+            a[at] = value
+        self.n = n + 1
 
 
 def sweep_in_place(

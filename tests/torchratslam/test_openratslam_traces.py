@@ -9,8 +9,9 @@ images the C++ read) and fed with the odometry rows the C++ read.
 
 Asserted: in float64 the same template id and angle on every frame, the same action
 (kind, source, destination) on every frame, and final experience poses within 1e-9 m
-(and 1e-9 rad) of the C++'s; in float32 the same actions. The experience map alone is
-also replayed on the C++'s actions (independent of the pose cells).
+(and 1e-9 rad) of the C++'s; in float32 the same actions up to a frame (if any) whose
+decision lies within float32's rounding. The experience map alone is also replayed on
+the C++'s actions (independent of the pose cells).
 """
 
 from __future__ import annotations
@@ -165,10 +166,48 @@ def test_the_reference_behaviour_reproduces_the_trace_in_float64(name):
     assert slam.trajectory()[:, 2].astype(int).tolist() == f["em_current_id"].tolist()
 
 
+def _torus(a: np.ndarray, b: np.ndarray, dims: tuple[int, int, int]) -> np.ndarray:
+    """Per axis the shorter way round the ring, then Euclidean (written out here)."""
+    d = np.abs(np.asarray(a, np.float64) - np.asarray(b, np.float64)) % np.array(dims)
+    d = np.minimum(d, np.array(dims) - d)
+    return np.sqrt((d * d).sum(-1))
+
+
 @pytest.mark.parametrize("name", NAMES)
-def test_the_reference_behaviour_takes_the_same_actions_in_float32(name):
+def test_float32_takes_the_cpps_actions_but_where_its_rounding_reaches_a_decision(name):
+    """float32 and float64 stepped side by side: the same template and action on every
+    frame, up to a frame (if any) whose double-precision decision lies within the float32
+    rounding: some experience's distance from the packet within ``2 * delta`` of
+    ``exp_delta_pc_threshold``, or two experiences of the template within ``2 * delta`` of
+    each other, ``delta`` being how far float32 has carried the centre and the
+    experiences' cells (the distance is 1-Lipschitz in both). The float64 run is the
+    C++'s (the test above)."""
     f = trace(name)["f"]
-    _, got = run(name, torch.float32)
-    bad = np.nonzero(got[:, 2] != f["action"])[0]
-    assert bad.size == 0, f"actions differ on {bad.size} frames, first {bad[:5].tolist()}"
-    np.testing.assert_array_equal(got[:, 0], f["vt_id"])
+    cfg = load_config(trace(name)["config"])
+    torch.set_num_threads(1)
+    s64, s32 = RatSLAM(cfg, dtype=torch.float64), RatSLAM(cfg, dtype=torch.float32)
+    p = cfg.pose_cells
+    dims = (p.pc_dim_xy, p.pc_dim_xy, p.pc_dim_th)
+    for fr in frames(name):
+        r64, r32 = s64.step_frame(fr), s32.step_frame(fr)
+        assert r32.view.template_id == r64.view.template_id
+        same = (r32.action.kind, r32.action.src_id, r32.action.dest_id) == (
+            r64.action.kind,
+            r64.action.src_id,
+            r64.action.dest_id,
+        )
+        if same:
+            continue
+        pc64, pc32 = s64.pose_cells, s32.pose_cells
+        delta = float(_torus(r32.pc, r64.pc, dims)) + float(
+            _torus(pc32.exp_pc[: len(pc64.exp_pc)], pc64.exp_pc, dims).max(initial=0.0)
+        )
+        th = (r64.pc[2] - pc64.vt_delta_pc_th) % dims[2]
+        d = _torus(pc64.exp_pc, np.array([r64.pc[0], r64.pc[1], th]), dims)
+        mine = np.sort(d[pc64.exp_template == r64.view.template_id])
+        margins = [np.abs(d - p.exp_delta_pc_threshold).min(), np.diff(mine).min(initial=np.inf)]
+        assert min(margins) <= 2 * delta + 1e-9, (fr.index, margins, delta)
+        assert delta > 0  # the two runs did part by rounding
+        break
+    else:
+        assert (f["action"] != 0).sum() > 10  # the trace did exercise the actions

@@ -12,7 +12,7 @@ import math
 import time
 from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 import torch
@@ -41,6 +41,12 @@ from torchratslam.timing import TimeLogger
 __all__ = ["RatSLAM"]
 
 log = logging.getLogger(__name__)
+
+
+def _has_injection_angle(pose_cells: object) -> bool:
+    """``isinstance(pose_cells, InjectionAngle)`` without the protocol check's cost per
+    frame (the members are looked up directly)."""
+    return hasattr(pose_cells, "vt_delta_pc_th") and hasattr(pose_cells, "dims")
 
 
 def _centre(pose_cells: PoseCellModule) -> tuple[float, float, float]:
@@ -197,10 +203,11 @@ class RatSLAM:
                 if (
                     action.kind != ActionKind.NONE
                     and self.config.general.action_angle == "injection"
-                    and isinstance(pcs, InjectionAngle)
+                    and _has_injection_angle(pcs)
                 ):
                     # OpenRatSLAM's get_relative_rad(): the angle of the last injection
-                    rad = pcs.vt_delta_pc_th * 2.0 * math.pi / pcs.dims[2]
+                    inj = cast(InjectionAngle, pcs)
+                    rad = inj.vt_delta_pc_th * 2.0 * math.pi / inj.dims[2]
                     action = dataclasses.replace(action, relative_rad=rad)
             pc = _centre(pcs)
         return action, pc

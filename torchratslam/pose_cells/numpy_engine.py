@@ -50,7 +50,7 @@ class NumpyEngine:
         self.decoder = CentreDecoder(params)
         self.last_crop: tuple[int, int, int] = (th, xy, xy)
         """The box (theta, y, x cells) the last step computed on."""
-        self._mats: dict[tuple[str, int, bool], np.ndarray] = {}
+        self._taps: dict[str, np.ndarray] = {}
         self._index: dict[tuple, Any] = {}  # index arrays and per-crop (coef, index) tuples
         self._arcs: list[tuple[int, int]] | None = None
         self._arcs_key: tuple[int, int] | None = None
@@ -59,31 +59,23 @@ class NumpyEngine:
     def retarget(self, dtype: torch.dtype) -> None:
         """Follow the activity to a new dtype: drop every cache."""
         self.dtype = dtype
-        self._mats = {}
+        self._taps = {}
         self.invalidate()
 
     def invalidate(self) -> None:
         """Forget what was derived from the activity's contents (it was replaced)."""
         self._arcs = None
 
-    def _matrix(self, which: str, n: int, circular: bool) -> np.ndarray:
-        key = (which, n, circular)
-        m = self._mats.get(key)
-        if m is None:
-            dt = np.float64 if self.dtype == torch.float64 else np.float32
-            m = np.ascontiguousarray(F.ring_matrix(self.kernels[which], n, circular).astype(dt))
-            self._mats[key] = m
-        return m
-
     def _conv(self, a: np.ndarray, which: str, circ: tuple[bool, bool, bool]) -> np.ndarray:
-        """Separable 3D convolution of ``a`` (T, Y, X) by three matrix products."""
-        t, y, x = a.shape
-        mx = self._matrix(which, x, circ[2])
-        my = self._matrix(which, y, circ[1])
-        mt = self._matrix(which, t, circ[0])
-        out = (a.reshape(t * y, x) @ mx.T).reshape(t, y, x)
-        out = np.matmul(my, out)
-        return (mt @ out.reshape(t, y * x)).reshape(t, y, x)
+        """Separable 3D convolution of ``a`` (T, Y, X), the taps summed in a fixed order
+        in ``a``'s dtype (:mod:`~torchratslam.pose_cells._taps`: no BLAS call, so the
+        same bits on every CPU)."""
+        from torchratslam.pose_cells._taps import conv3
+
+        w = self._taps.get(which)
+        if w is None or w.dtype != a.dtype:
+            w = self._taps[which] = self.kernels[which].astype(a.dtype)
+        return conv3(np.ascontiguousarray(a), w, circ[0], circ[1], circ[2])
 
     def _arcs_of(self, activity: torch.Tensor, act: np.ndarray) -> list[tuple[int, int]]:
         key = (activity.data_ptr(), activity._version)
