@@ -42,7 +42,19 @@ log = logging.getLogger(__name__)
 
 
 def peak_memory_mb() -> float:
-    """Peak resident memory of this process so far, in MiB (``getrusage``)."""
+    """Peak resident memory of this process so far, in MiB.
+
+    On Linux ``VmHWM`` from ``/proc/self/status``: the high-water mark of this program's
+    own memory (``getrusage``'s ``ru_maxrss`` survives ``exec``, so a process started
+    by a larger one would report its parent's peak). Elsewhere ``ru_maxrss``.
+    """
+    try:
+        with open("/proc/self/status") as f:
+            for line in f:
+                if line.startswith("VmHWM:"):
+                    return int(line.split()[1]) / 1024.0  # kB
+    except OSError:
+        pass
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
     return peak / (1024.0 * 1024.0) if sys.platform == "darwin" else peak / 1024.0
 

@@ -3,12 +3,20 @@
 from __future__ import annotations
 
 import json
+import subprocess
+import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
 
 from torchratslam.errors import InputError
-from torchratslam.eval.scale import format_scale_table, read_openratslam_trace, scale_report
+from torchratslam.eval.scale import (
+    format_scale_table,
+    peak_memory_mb,
+    read_openratslam_trace,
+    scale_report,
+)
 
 
 def test_scale_report_matches_a_loop_over_the_spans():
@@ -87,3 +95,16 @@ def test_run_records_the_scale_report(tmp_path):
     assert rep["parts"][-1]["links"] == json.loads((out / "metrics.json").read_text())["links"]
     assert rep["peak_memory_mb"] > 0
     assert (out / "scale.png").stat().st_size > 1000 and (out / "scale.md").exists()
+
+
+@pytest.mark.skipif(not Path("/proc/self/status").exists(), reason="Linux /proc")
+def test_peak_memory_is_the_programs_own_not_its_parents():
+    """``ru_maxrss`` survives ``exec``: a child of a large process would report the
+    parent's peak. The child here reads its own high-water mark."""
+    big = np.ones(400 * 1024 * 1024 // 8)
+    big += 1  # touch every page
+    code = "from torchratslam.eval.scale import peak_memory_mb; print(peak_memory_mb())"
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    child = float(done.stdout.strip())
+    assert 0 < child < peak_memory_mb() - 300, (child, peak_memory_mb())
+    del big
