@@ -1,9 +1,10 @@
-"""Sweeps: B configurations that differ only in pose-cell module parameters, run as B
-separate runs against one group (frames, odometry and local view computed once; B
-pose-cell modules and B experience maps). With 21x21x36 pose cells (OpenRatSLAM's size,
-whole-network dynamics) the group steps one PoseCellNetwork with B networks per frame;
-with 80x80x35 (the virtual_tour preset; cropped dynamics) the networks step one by one
-and only the frames and views are shared.
+"""Sweeps: B configurations that differ only in pose-cell module and experience-map
+parameters (``pc_vt_inject_energy``, ``exp_delta_pc_threshold``, ``exp_correction``), run
+as B separate runs against one group (frames, odometry and local view computed once; B
+pose-cell modules and B experience maps), in the default behaviour (OpenRatSLAM's: each
+run's network steps alone in numpy, as a separate run's does). With the torch step
+(``pc_engine: torch``) and 21x21x36 pose cells (OpenRatSLAM's size, whole-network
+dynamics) the group steps one PoseCellNetwork with B networks per frame.
 
 Both sides run in this process, one after the other, on the same frames of two laps of
 the loop tour with the virtual_tour config, single thread; the group's rows must equal
@@ -24,20 +25,23 @@ from torchratslam.sweeps.runner import TIMING_COLUMNS, run_group, run_one, share
 from torchratslam.sweeps.spec import from_dict
 
 DATA = "sim:loop?laps=2&frames={frames}&lasers=0"
-ENERGIES = (0.02, 0.04, 0.06, 0.1, 0.15, 0.2, 0.3, 0.4)
+ENERGIES = (0.02, 0.06, 0.15, 0.3)
 THRESHOLDS = (2.0, 4.0)
+CORRECTIONS = (0.5, 0.7)
+TORCH_STEP = {"pc_engine": "torch", "skip_first_odometry": False}
 
 
-def _runs(batch: int, frames: int, cells: tuple[int, int]) -> list:
-    combos = [(e, t) for t in THRESHOLDS for e in ENERGIES][:batch]
+def _runs(batch: int, frames: int, cells: tuple[int, int], behaviour: dict) -> list:
+    combos = [(e, t, c) for c in CORRECTIONS for t in THRESHOLDS for e in ENERGIES][:batch]
     spec = from_dict(
         {
             "base": "virtual_tour",
-            "set": {"pc_dim_xy": cells[0], "pc_dim_th": cells[1]},
+            "set": {"pc_dim_xy": cells[0], "pc_dim_th": cells[1], **behaviour},
             "mode": "list",
             "parameters": {
                 "pc_vt_inject_energy": [c[0] for c in combos],
                 "exp_delta_pc_threshold": [c[1] for c in combos],
+                "exp_correction": [c[2] for c in combos],
             },
             "datasets": [DATA.format(frames=frames)],
         }
@@ -49,17 +53,20 @@ def _strip(rows: list[dict]) -> list[dict]:
     return [{k: v for k, v in r.items() if k not in TIMING_COLUMNS} for r in rows]
 
 
-def measure(quick: bool = False) -> list[dict]:
-    """One row per group size B: wall seconds of B separate runs and of one group."""
+def measure(quick: bool = False, default_only: bool = False) -> list[dict]:
+    """One row per case: wall seconds of B separate runs and of one group
+    (``default_only``: the default behaviour's case only)."""
     frames = 120 if quick else 240
     out = []
-    cases = [((21, 36), (2, 4) if quick else (4, 16))]
-    if not quick:
-        cases.append(((80, 35), (8,)))
-    run_one(_runs(1, 20, (21, 36))[0])  # warm up (first-call allocations, caches)
-    for cells, batches in cases:
+    cases = [((21, 36), {}, (4,) if quick else (16,))]
+    if not (quick or default_only):
+        cases.append(((21, 36), TORCH_STEP, (16,)))
+        cases.append(((80, 35), {}, (8,)))
+    run_one(_runs(1, 20, (21, 36), {})[0])  # warm up (first-call allocations, caches)
+    for cells, behaviour, batches in cases:
         for batch in batches:
-            runs = _runs(batch, frames, cells)
+            runs = _runs(batch, frames, cells, behaviour)
+            pc = runs[0].config().pose_cells
             t0 = time.perf_counter()
             separate = [run_one(r) for r in runs]
             t_sep = time.perf_counter() - t0
@@ -69,7 +76,8 @@ def measure(quick: bool = False) -> list[dict]:
             out.append(
                 {
                     "cells": f"{cells[0]}x{cells[0]}x{cells[1]}",
-                    "shared": shares_network(PoseCells(runs[0].config().pose_cells).network),
+                    "behaviour": "torch step" if behaviour else "default",
+                    "shared": shares_network(PoseCells(pc).network, pc.pc_engine),
                     "B": batch,
                     "frames": frames,
                     "separate_s": t_sep,
@@ -82,28 +90,33 @@ def measure(quick: bool = False) -> list[dict]:
     return out
 
 
-def main() -> None:
-    torch.set_num_threads(1)
-    quick = os.environ.get("BENCH_QUICK", "") not in ("", "0")
-    rows = measure(quick)
-    print("B configurations differing in pc_vt_inject_energy / exp_delta_pc_threshold on")
-    print(f"{rows[0]['frames']} frames of the loop tour (virtual_tour config), 1 thread:")
-    print("B separate runs against one group.\n")
+def print_table(rows: list[dict]) -> None:
+    """The rows of :func:`measure` as a Markdown table, with what they are."""
+    print("B configurations differing in pc_vt_inject_energy / exp_delta_pc_threshold /")
+    print(f"exp_correction on {rows[0]['frames']} frames of the loop tour (virtual_tour")
+    print("config), 1 thread: B separate runs against one group.\n")
     print(
-        "| pose cells | one batched network | B | separate (s) | group (s) | run-frames/s "
-        "separate | run-frames/s group | speed-up | pose cells ms/frame per run: separate "
-        "/ group | same rows |"
+        "| behaviour | pose cells | one batched network | B | separate (s) | group (s) | "
+        "run-frames/s separate | run-frames/s group | speed-up | pose cells ms/frame per "
+        "run: separate / group | same rows |"
     )
-    print("|---|---|---|---|---|---|---|---|---|---|")
+    print("|---|---|---|---|---|---|---|---|---|---|---|")
     for r in rows:
         n = r["B"] * r["frames"]
         print(
-            f"| {r['cells']} | {'yes' if r['shared'] else 'no (cropped)'} | {r['B']} | "
+            f"| {r['behaviour']} | {r['cells']} | {'yes' if r['shared'] else 'no'} | {r['B']} | "
             f"{r['separate_s']:.2f} | {r['group_s']:.2f} | "
             f"{n / r['separate_s']:.0f} | {n / r['group_s']:.0f} | "
             f"{r['separate_s'] / r['group_s']:.1f}x | {r['pc_ms_separate']:.2f} / "
             f"{r['pc_ms_group']:.2f} | {'yes' if r['equal'] else 'NO'} |"
         )
+    print()
+
+
+def main() -> None:
+    torch.set_num_threads(1)
+    quick = os.environ.get("BENCH_QUICK", "") not in ("", "0")
+    print_table(measure(quick))
 
 
 if __name__ == "__main__":

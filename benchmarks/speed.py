@@ -375,6 +375,10 @@ def main(
         print(f"[speed] suburb, {p.suburb_frames} frames", file=sys.stderr, flush=True)
         print_suburb(suburb_side_by_side(build, p.suburb_frames, p.out))
     print_imports(import_cost())
+    print("[speed] sweep, grouped against separate runs", file=sys.stderr, flush=True)
+    from benchmarks import bench_sweep
+
+    bench_sweep.print_table(bench_sweep.measure(quick, default_only=True))
     print(
         f"(speed report: {time.perf_counter() - t0:.0f} s; load average "
         f"{load0:.1f} at the start, {os.getloadavg()[0]:.1f} at the end)"

@@ -189,10 +189,6 @@ def batch_key(run: RunSpec) -> tuple | None:
         return None
     if config.general.pose_cells != "ratslam":
         return None
-    # the replay shares one torch network and replays every frame's action: OpenRatSLAM's
-    # behaviour (numpy step for one network, no step at frame 0) runs alone
-    if config.pose_cells.pc_engine != "torch" or config.general.skip_first_odometry:
-        return None
     flat = config.to_flat()
     em_keys = set(type(config.experience_map).keys())
     shared = tuple(
@@ -205,15 +201,17 @@ def batch_key(run: RunSpec) -> tuple | None:
     return (run.data, run.max_frames, shared)
 
 
-def shares_network(network: Any) -> bool:
+def shares_network(network: Any, pc_engine: str) -> bool:
     """Whether a group may step its runs' networks as one batched network.
 
-    Only networks whose dynamics run on the whole network (``separable``, ``conv3d``)
-    give the same numbers in a batch as alone; the ``crop`` method sizes its box by the
-    widest packet of the batch, which changes the rounding of the others. Groups of
-    cropped networks still share the frames, odometry and local view.
+    Only the torch step (``pc_engine: torch``; a lone CPU network otherwise steps in
+    numpy, whose rounding a batch would not reproduce) on networks whose dynamics run on
+    the whole network (``separable``, ``conv3d``) gives the same numbers in a batch as
+    alone; the ``crop`` method sizes its box by the widest packet of the batch, which
+    changes the rounding of the others. Other groups still share the frames, odometry
+    and local view, and step each run's network alone.
     """
-    return getattr(network, "method", None) in ("separable", "conv3d")
+    return pc_engine == "torch" and getattr(network, "method", None) in ("separable", "conv3d")
 
 
 class _SlotNetwork:
@@ -265,10 +263,15 @@ class _ReplayView:
 
 
 class _ReplayPoseCells:
-    """A pose-cell module that hands out the actions and centres of a batched pass."""
+    """A pose-cell module that hands out the actions, centres and injection angles
+    (``vt_delta_pc_th``, what the pipeline's ``action_angle: injection`` reads) of a
+    group's pass, frame by frame."""
 
-    def __init__(self, actions: list[Any], centres: list[tuple], module: Any) -> None:
-        self._actions, self._centres, self._module = actions, centres, module
+    def __init__(
+        self, actions: list[Any], centres: list[tuple], angles: list[float], module: Any
+    ) -> None:
+        self._actions, self._centres, self._angles = actions, centres, angles
+        self._module = module
         self._i = -1
 
     def on_view_template(self, match: Any) -> None:
@@ -280,6 +283,10 @@ class _ReplayPoseCells:
     @property
     def centre(self) -> tuple[float, float, float]:
         return self._centres[self._i]
+
+    @property
+    def vt_delta_pc_th(self) -> float:
+        return self._angles[self._i]
 
     @property
     def activity(self) -> Any:
@@ -303,11 +310,14 @@ def run_group(runs: Sequence[RunSpec]) -> list[dict[str, Any]]:
 
     The frames are read, and the odometry and local view computed, once; each frame
     steps all ``B`` pose-cell networks in one call (when :func:`shares_network`, else
-    one by one); each run then replays its views and actions through its own
-    :class:`~torchratslam.pipeline.RatSLAM` (its own experience map).
+    one by one, each exactly as its own run would: the numpy step of OpenRatSLAM's
+    behaviour included); each run then replays its views and actions through its own
+    :class:`~torchratslam.pipeline.RatSLAM` (its own experience map). With
+    ``skip_first_odometry`` no network steps at frame 0, as in a separate run.
     """
     import torch
 
+    from torchratslam.messages import Action
     from torchratslam.pipeline import RatSLAM
     from torchratslam.pose_cells.network import PoseCellNetwork
     from torchratslam.pose_cells.stage import PoseCells
@@ -321,7 +331,7 @@ def run_group(runs: Sequence[RunSpec]) -> list[dict[str, Any]]:
     modules = [PoseCells(c.pose_cells) for c in configs]
     slots: list[_SlotNetwork] = []
     shared = None
-    if shares_network(modules[0].network):
+    if shares_network(modules[0].network, configs[0].pose_cells.pc_engine):
         shared = PoseCellNetwork(configs[0].pose_cells, len(runs), method=modules[0].network.method)
         for b, m in enumerate(modules):
             slot = _SlotNetwork(shared, b, m.network.dims)
@@ -330,8 +340,10 @@ def run_group(runs: Sequence[RunSpec]) -> list[dict[str, Any]]:
     frames, odos, views, sizes = [], [], [], []
     actions: list[list[Any]] = [[] for _ in runs]
     centres: list[list[tuple]] = [[] for _ in runs]
+    angles: list[list[float]] = [[] for _ in runs]
     t_odo = t_view = t_pc = 0.0
     zeros = np.zeros(len(runs), dtype=np.int64)
+    skip_first = bool(configs[0].general.skip_first_odometry)  # a key the group shares
     for i, frame in enumerate(_frames(data, runs[0].max_frames)):
         frames.append(frame)
         c0 = time.perf_counter()
@@ -344,6 +356,7 @@ def run_group(runs: Sequence[RunSpec]) -> list[dict[str, Any]]:
         sizes.append(len(ref.local_view))
         for m in modules:
             m.on_view_template(view)
+        skip = skip_first and i == 0
         if shared is not None:  # every network in one call
             inj = [s.pending for s in slots]
             if any(p is not None for p in inj):
@@ -353,13 +366,15 @@ def run_group(runs: Sequence[RunSpec]) -> list[dict[str, Any]]:
                         x[b], y[b], th[b], e[b] = p
                         slots[b].pending = None
                 shared.inject(x, y, th, e)
-            cents = shared.step(odo[0], odo[1], odo[2])
-            for b, slot in enumerate(slots):
-                slot.centre_row = cents[b : b + 1]
+            if not skip:
+                cents = shared.step(odo[0], odo[1], odo[2])
+                for b, slot in enumerate(slots):
+                    slot.centre_row = cents[b : b + 1]
         for b, m in enumerate(modules):
-            actions[b].append(m.on_odometry(*odo))
+            actions[b].append(Action.none() if skip else m.on_odometry(*odo))
             c = m.centre
             centres[b].append((float(c[0]), float(c[1]), float(c[2])))
+            angles[b].append(float(m.vt_delta_pc_th))
         c3 = time.perf_counter()
         t_odo += c1 - c0
         t_view += c2 - c1
@@ -373,7 +388,7 @@ def run_group(runs: Sequence[RunSpec]) -> list[dict[str, Any]]:
         slam = RatSLAM(
             config,
             local_view=_ReplayView(views, sizes, templates),
-            pose_cells=_ReplayPoseCells(actions[b], centres[b], modules[b]),
+            pose_cells=_ReplayPoseCells(actions[b], centres[b], angles[b], modules[b]),
             odometry=_ReplayOdometry(odos),  # type: ignore[arg-type]
             dtype=torch.float32,
         )

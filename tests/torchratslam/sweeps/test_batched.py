@@ -24,19 +24,20 @@ def _strip(row):
 
 
 @pytest.mark.parametrize(
-    "cells, one_network",
-    [((21, 36), True), ((30, 35), False)],
-    ids=["batched-network", "cropped-networks"],
+    "cells, one_network, torch_step",
+    [((21, 36), True, True), ((30, 35), False, True), ((21, 36), False, False)],
+    ids=["batched-network", "cropped-networks", "openratslam-behaviour"],
 )
-def test_batched_group_equals_separate_runs(cells, one_network):
+def test_batched_group_equals_separate_runs(cells, one_network, torch_step):
     xy, th = cells
+    # the torch step in a batch needs a step at frame 0; OpenRatSLAM's behaviour (the
+    # default: numpy step, none at frame 0) steps each run's network alone
+    behaviour = {"pc_engine": "torch", "skip_first_odometry": False} if torch_step else {}
     spec = from_dict(
         {
             "base": "virtual_tour",
             "set": {
-                # batching needs the torch pose-cell step and a step at frame 0
-                "pc_engine": "torch",
-                "skip_first_odometry": False,
+                **behaviour,
                 "pc_dim_xy": xy,
                 "pc_dim_th": th,
                 "exp_loops": 20,
@@ -54,8 +55,9 @@ def test_batched_group_equals_separate_runs(cells, one_network):
     )
     runs = spec.runs()
     assert len({batch_key(r) for r in runs}) == 1  # one group
-    # 21x21x36 networks step as one batched network; cropped ones share the views only
-    assert shares_network(PoseCells(runs[0].config().pose_cells).network) == one_network
+    # 21x21x36 torch networks step as one batched network; the others share the views only
+    pc = runs[0].config().pose_cells
+    assert shares_network(PoseCells(pc).network, pc.pc_engine) == one_network
     assert make_units(runs, workers=1) == [runs]
     batched = run_group(runs)
     separate = [run_one(r) for r in runs]
@@ -85,13 +87,16 @@ def test_local_view_keys_split_groups():
     assert sorted(len(u) for u in make_units(runs, workers=4)) == [1, 1, 1, 1]
 
 
-def test_openratslams_behaviour_is_never_batched():
-    """OpenRatSLAM's behaviour (numpy step, no step at frame 0) runs each config alone."""
-    spec = from_dict(
-        {
-            "base": "virtual_tour",
-            "parameters": {"pc_vt_inject_energy": [0.02, 0.3]},
-            "datasets": [DATA],
-        }
-    )
-    assert all(batch_key(r) is None for r in spec.runs())
+def test_keys_of_the_network_split_groups_in_every_profile():
+    """A key the pose-cell network reads (its size) splits groups, in OpenRatSLAM's
+    behaviour as in the torch step."""
+    for behaviour in ({}, {"pc_engine": "torch", "skip_first_odometry": False}):
+        spec = from_dict(
+            {
+                "base": "virtual_tour",
+                "set": behaviour,
+                "parameters": {"pc_dim_xy": [15, 21], "pc_vt_inject_energy": [0.02, 0.3]},
+                "datasets": [DATA],
+            }
+        )
+        assert len({batch_key(r) for r in spec.runs()}) == 2
