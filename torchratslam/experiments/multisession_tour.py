@@ -175,14 +175,11 @@ def run_sessions(
             frames = _shifted(frames, offsets[i])
         if hasattr(s, "__len__"):  # the progress bar shows the session's total
             frames = _Sized(frames, len(s))
-        if progress:
-            from tqdm import tqdm
-
-            tqdm.write(f"session {i + 1}/{len(sessions)}: {name}")
+        label = f"session {i + 1}/{len(sessions)} {name}" if progress else False
         if observer is not None:
             observer.attach(ms, name)
             frames = observer.frames(frames)
-        res = ms.run(frames, max_frames=max_frames, progress=progress, callback=observer)
+        res = ms.run(frames, max_frames=max_frames, progress=label, callback=observer)
         relax_s += float(res.timings.get("experience_map", {}).get("total_s", 0.0))
         state = ms.get_map()
         if save_dir is not None:
@@ -243,9 +240,10 @@ def tour_clock(tour: Any) -> _Clock:
 
 
 def single_run(
-    config: RatSLAMConfig, frames: Any, n: int | None, progress: bool, **ratslam_kwargs: Any
+    config: RatSLAMConfig, frames: Any, n: int | None, progress: bool | str, **ratslam_kwargs: Any
 ) -> tuple[MapState, float]:
-    """One single-session map over ``frames`` and its wall time (s)."""
+    """One single-session map over ``frames`` and its wall time (s); ``progress``: a
+    bar, labelled when a label is given."""
     from torchratslam.maps.running import state_from_slam
 
     t0 = time.perf_counter()
@@ -466,13 +464,19 @@ def run_tour(
         kw["merge_options"] = dict(merge_options)
     kw.update(session_options or {})
     last_frames = _shifted(tour.sessions[-1].frames(), clock.offsets[-1])
+
+    def bar(label: str) -> bool | str:
+        return label if progress else False
+
     singles = {  # the paper's single session; the concatenation; the last session alone
-        "single": single_run(config, clock.cont.frames(), limit, progress, **ratslam_kwargs),
+        "single": single_run(
+            config, clock.cont.frames(), limit, bar("single session"), **ratslam_kwargs
+        ),
         "single_concatenated": single_run(
-            config, clock.full.frames(), limit, progress, **ratslam_kwargs
+            config, clock.full.frames(), limit, bar("sessions concatenated"), **ratslam_kwargs
         ),
         "single_last_session": single_run(
-            config, last_frames, max_frames, progress, **ratslam_kwargs
+            config, last_frames, max_frames, bar("last session alone"), **ratslam_kwargs
         ),
     }
     save = None if save_dir is None else Path(save_dir) / "multi"
