@@ -30,6 +30,7 @@ class CentreDecoder:
         self._lookups: dict[int, tuple[np.ndarray, np.ndarray]] = {}
         self._ring_key: tuple | None = None
         self._ring_cache: list[tuple[np.ndarray, np.ndarray, int]] = []
+        self._tables: np.ndarray | None = None
 
     def rings(self) -> list[tuple[np.ndarray, np.ndarray, int]]:
         """Per axis (x, y, th): the wrapped ``+-pc_cells_to_avg`` window of every cell,
@@ -54,6 +55,20 @@ class CentreDecoder:
             lk = (np.sin(ang), np.cos(ang))
             self._lookups[n] = lk
         return lk
+
+    def find_best_tables(self) -> np.ndarray:
+        """find_best's ``sin``, ``cos`` lookups per axis, rows ``sin x, cos x, sin y, cos y,
+        sin th, cos th``, each padded with zeros to the longest axis (cached).
+
+        Shape:
+            returns ``(6, max(X, Y, TH))`` float64.
+        """
+        if self._tables is None:
+            tab = np.zeros((6, max(self.dims)), dtype=np.float64)
+            for ax, n in enumerate(self.dims):
+                tab[2 * ax, :n], tab[2 * ax + 1, :n] = self._decode_lookups(n)
+            self._tables = tab
+        return self._tables
 
     def cpp_position(self, sums: np.ndarray, ring: np.ndarray, n: int) -> float:
         """find_best on one axis: ``atan2`` of the (i + 1) phasor sums (in cell order),
@@ -110,11 +125,16 @@ class CentreDecoder:
         return out
 
     def decode_one(self, act: np.ndarray, peak: int) -> tuple[float, float, float]:
-        """The centre of one network around the flat ``peak`` index.
+        """The centre of one network around the flat ``peak`` index (find_best compiled,
+        :func:`~torchratslam.pose_cells._step.find_best`, with ``pc_decode="openratslam"``).
 
         Shape:
             act: ``(TH, Y, X)``.
         """
+        if self.cpp_decode:
+            from torchratslam.pose_cells._step import find_best
+
+            return find_best(act, int(peak), self.cells_to_avg, self.find_best_tables())
         n_x, n_y, n_t = self.dims
         pt, py, px = peak // (n_y * n_x), (peak // n_x) % n_y, peak % n_x
         (wx, ex, _), (wy, ey, _), (wt, et, _) = self.rings()
@@ -126,12 +146,8 @@ class CentreDecoder:
         sums = (c2.sum(axis=0), c2.sum(axis=1), cube.sum(axis=(1, 2)))
         rings = (ix, iy, it)
         res: list[float] = []
-        if self.cpp_decode:
-            for sm, ring, n in zip(sums, rings, (n_x, n_y, n_t), strict=True):
-                res.append(self.cpp_position(sm, ring, n))
-        else:
-            for sm, ring, ph, n in zip(sums, rings, (ex, ey, et), (n_x, n_y, n_t), strict=True):
-                v = np.angle((sm * ph[ring]).sum())
-                pos = float(np.remainder(v * (n / (2.0 * math.pi)), float(n)))
-                res.append(pos - n if pos >= n else pos)
+        for sm, ring, ph, n in zip(sums, rings, (ex, ey, et), (n_x, n_y, n_t), strict=True):
+            v = np.angle((sm * ph[ring]).sum())
+            pos = float(np.remainder(v * (n / (2.0 * math.pi)), float(n)))
+            res.append(pos - n if pos >= n else pos)
         return (res[0], res[1], res[2])
