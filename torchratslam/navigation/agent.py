@@ -27,6 +27,7 @@ import numpy as np
 
 from ratslam_graph.errors import InputError
 from ratslam_graph.experience_map import ExperienceMap
+from ratslam_graph.geometry import wrap_angle
 from ratslam_graph.navigation.recovery import (
     RecoveryMode,
     RecoveryParams,
@@ -121,8 +122,8 @@ class NavigationAgent:
         return self.robot.slam.experience_map  # type: ignore[return-value]
 
     def mark_goal(self, name: str) -> Goal:
-        """The goal at node ``name``: the experience current when the robot passed
-        nearest it so far.
+        """The goal at node ``name``: the experience current when the robot last passed
+        nearest it (within 5 cm of its nearest) so far.
 
         Raises:
             InputError: the robot never came within ``reach_m`` of it.
@@ -131,7 +132,7 @@ class NavigationAgent:
         xy = r.office.nodes[r.office.node(name)]
         traj = r.trajectory()
         d = np.hypot(*(traj[:, :2] - xy).T)
-        k = int(np.argmin(d))
+        k = int(np.flatnonzero(d <= d.min() + 0.05)[-1])  # the latest of the nearest passes
         if d[k] > self.params.reach_m:
             raise InputError(f"the robot has not been within {self.params.reach_m} m of {name}")
         return Goal(name, (float(xy[0]), float(xy[1])), int(r.exp_ids[k]))
@@ -140,6 +141,26 @@ class NavigationAgent:
         em = self.em
         here = map_pose(em)[:2]
         return bool(np.hypot(*(em.poses[goal.exp, :2] - here)) <= self.params.arrive_m)
+
+    def _count_blocked(self, pose: np.ndarray, behaviour: int) -> None:
+        """A blocked transition counts against the links of the place's other
+        representations too (Eq. 9).
+
+        The planner treats the experiences overlapping the robot's place as where it is;
+        obstacle avoidance turning the robot around means ``behaviour`` did not take it
+        where their links said, so each of those facing the robot's way (within
+        ``overlap_m`` and 45 degrees of its map pose ``pose``) counts the transition to
+        the current experience (links whose confidence falls below the threshold are
+        deleted).
+        """
+        em = self.em
+        cur = em.current_id
+        d = np.hypot(*(em.poses[:, :2] - pose[:2]).T)
+        turn = np.abs(wrap_angle(em.poses[:, 2] - pose[2]))
+        group = np.flatnonzero((d <= self.params.overlap_m) & (turn <= np.pi / 4))
+        threshold = em.params.exp_link_confidence_threshold
+        for x in group[group != cur].tolist():  # the few experiences overlapping one place
+            em.store.count_transition(x, cur, behaviour, threshold)
 
     def navigate(self, goal: Goal) -> Trial:
         """Drive to ``goal`` (see the module docstring)."""
@@ -153,7 +174,7 @@ class NavigationAgent:
         del0, rel0 = r.links.deleted, r.links.relearnt
         rec = RecoveryParams(timeout_s=p.recovery_timeout_s)
         state = RecoveryState()
-        last_exp, last_plan, last_turn = -2, -np.inf, -np.inf
+        last_exp, last_plan, turn_ok = -2, -np.inf, -np.inf
         first: tuple[int, ...] | None = None
         ms: list[float] = []
         lost = 0.0
@@ -191,11 +212,15 @@ class NavigationAgent:
                     xy,
                     lookahead_m=p.lookahead_m,
                     turn_margin_m=p.turn_margin_m,
-                    allow_turn=now - last_turn >= p.turn_cooldown_s,
+                    allow_turn=now >= turn_ok,
                 )
                 if b is Behaviour.TURN_AROUND:
-                    last_turn = now
-            r.tick(int(b))
+                    turn_ok = now + p.turn_cooldown_s
+            pose_before = map_pose(self.em)
+            tick = r.tick(int(b))
+            if tick.step.blocked:  # obstacle avoidance turned: no turning back at once
+                turn_ok = now + p.blocked_cooldown_s
+                self._count_blocked(pose_before, tick.label)
         path = r.trajectory()[f0 - 1 :, :2]
         driven = float(np.hypot(*np.diff(path, axis=0).T).sum())
         reached = bool(np.hypot(*(sim.pose[:2] - np.asarray(goal.xy))) <= p.reach_m)

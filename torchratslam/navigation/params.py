@@ -25,6 +25,8 @@ class NavParams:
         lookahead_m: arbitration compares local paths with the route's first metres.
         turn_margin_m: turning around must beat the best forward path by this (m).
         turn_cooldown_s: no deliberate turn-around within this long of the last one.
+        blocked_cooldown_s: nor within this long of obstacle avoidance turning the
+            robot around (it drives away before trying again).
         replan_s: the route is found afresh at least this often (and whenever the
             current experience changes).
         arrive_m: the robot believes it has arrived when its map position is this close
@@ -35,11 +37,15 @@ class NavParams:
             plus ``time_slack_s``.
         time_slack_s: see ``time_factor``.
         junction_m: the held branch behaviour labels frames within this of a junction.
+        overlap_m: experiences this close to the robot's map pose (facing its way) are
+            other representations of its place: the planner seeds them and a blocked
+            transition counts against their links.
     """
 
     lookahead_m: float = 3.0
     turn_margin_m: float = 0.6
     turn_cooldown_s: float = 4.0
+    blocked_cooldown_s: float = 8.0
     replan_s: float = 1.0
     arrive_m: float = 0.8
     reach_m: float = 1.5
@@ -47,9 +53,17 @@ class NavParams:
     time_factor: float = 4.0
     time_slack_s: float = 60.0
     junction_m: float = 1.5
+    overlap_m: float = 1.0
 
     def __post_init__(self) -> None:
-        for name in ("lookahead_m", "arrive_m", "reach_m", "time_factor", "junction_m"):
+        for name in (
+            "lookahead_m",
+            "arrive_m",
+            "reach_m",
+            "time_factor",
+            "junction_m",
+            "overlap_m",
+        ):
             if not getattr(self, name) > 0:
                 raise ConfigError(f"NavParams.{name}={getattr(self, name)} must be > 0")
 

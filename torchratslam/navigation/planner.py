@@ -57,6 +57,7 @@ def plan_route(
     radius_m: float = 1.0,
     speed: float = 0.5,
     turn_rate: float = np.pi / 2,
+    directed: bool = True,
 ) -> Plan:
     """The temporal map from the robot's place and the route to ``goal``.
 
@@ -65,13 +66,17 @@ def plan_route(
     ``radius_m`` of the robot's map pose), each at the time it takes to get there
     (distance over ``speed`` plus the turn over ``turn_rate``); the goal is likewise
     reached at any experience overlapping the goal experience. Both are done with two
-    extra nodes linked to those experiences, so Eqs. 10-11 and the climb run as they are.
+    extra nodes linked to those experiences (one way: out of the robot's place, into
+    the goal), so Eqs. 10-11 and the climb run as they are.
 
     Args:
         em: the experience map.
         goal: the goal experience.
         radius_m: how close experiences overlap (m).
         speed, turn_rate: the robot's driving speed (m/s) and turning rate (rad/s).
+        directed: each link leads only the way it was driven, from ``src`` with its
+            behaviour to ``dst``: a route is then a chain of behaviours the robot has
+            executed, each monitored by Eq. 9. False: links both ways.
     """
     links = em.store
     n, e = links.n, links.e
@@ -84,16 +89,19 @@ def plan_route(
     near = np.union1d(near, [max(em.current_id, 0)]).astype(np.int64)
     dg = np.hypot(*(poses[:, :2] - poses[goal, :2]).T)
     at_goal = np.union1d(np.flatnonzero(dg <= radius_m), [goal]).astype(np.int64)
-    src = np.concatenate([links.src[:e], np.full(len(near), n), at_goal])
-    dst = np.concatenate([links.dst[:e], near, np.full(len(at_goal), n + 1)])
-    dt = np.concatenate(
-        [links.link[:e, 3], d[near] / speed + turn[near] / turn_rate, dg[at_goal] / speed]
-    )
-    adj = adjacency(n + 2, src, dst, dt)
-    tmap = temporal_map(n + 2, start=n, adj=adj)
+    s, g = links.src[:e], links.dst[:e]
+    w = links.link[:e, 3]
+    if not directed:
+        s, g, w = np.concatenate([s, g]), np.concatenate([g, s]), np.concatenate([w, w])
+    src = np.concatenate([s, np.full(len(near), n), at_goal])
+    dst = np.concatenate([g, near, np.full(len(at_goal), n + 1)])
+    dt = np.concatenate([w, d[near] / speed + turn[near] / turn_rate, dg[at_goal] / speed])
+    # the two extra nodes are linked one way only: out of the robot's place, into the
+    # goal (no shortcut through either)
+    tmap = temporal_map(n + 2, start=n, adj=adjacency(n + 2, src, dst, dt, directed=True))
     ms = 1000.0 * (time.perf_counter() - t0)
-    try:
-        full = climb_route(tmap, adj, n + 1)
+    try:  # the climb follows the links into each experience
+        full = climb_route(tmap, adjacency(n + 2, dst, src, dt, directed=True), n + 1)
         route: Route | None = Route(ids=full.ids[1:-1], times=full.times[1:-1])
     except GraphError:
         route = None
@@ -169,7 +177,7 @@ def arbitrate(
         route_xy: the route's experience positions.
         lookahead_m: length compared.
         turn_margin_m: the turn-around's handicap (m).
-        allow_turn: False rules turning around out.
+        allow_turn: False rules turning around out (unless nothing else is offered).
 
     Shape:
         route_xy: (R, 2).
@@ -182,6 +190,7 @@ def arbitrate(
     )
     here = world_pose[:2][None, :]
     offered = [(b, p) for b, p in paths if allow_turn or b is not Behaviour.TURN_AROUND]
+    offered = offered or list(paths)  # a dead end: turning around is all there is
     mapped = [
         to_map_frame(route_ahead(np.vstack([here, p]), lookahead_m), world_pose, est_pose)
         for _, p in offered

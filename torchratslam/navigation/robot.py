@@ -14,21 +14,27 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+import networkx as nx
 import numpy as np
 
 from torchratslam.config import RatSLAMConfig
+from torchratslam.errors import InputError
 from torchratslam.messages import Frame
 from torchratslam.navigation.labels import LabelState, next_label
 from torchratslam.pipeline.ratslam import RatSLAM
 from torchratslam.sim.office.builder import Office
-from torchratslam.sim.office.motion import Behaviour
+from torchratslam.sim.office.motion import Behaviour, options
 from torchratslam.sim.office.sim import OfficeParams, OfficeSim, OfficeStep
 
-__all__ = ["LinkEvents", "MappingRobot", "Tick"]
+__all__ = ["LinkEvents", "MappingRobot", "Tick", "count_link_events", "pair_keys"]
 
 
-def _pair_keys(src: np.ndarray, dst: np.ndarray) -> np.ndarray:
-    """An undirected key per link (``min * 2**32 + max``)."""
+def pair_keys(src: np.ndarray, dst: np.ndarray) -> np.ndarray:
+    """An undirected key per link (``min * 2**32 + max``).
+
+    Shape:
+        src, dst: (E,). Returns (E,) int64.
+    """
     a, b = np.minimum(src, dst).astype(np.int64), np.maximum(src, dst).astype(np.int64)
     return a * (1 << 32) + b
 
@@ -48,6 +54,30 @@ class LinkEvents:
     relearnt: int = 0
     gone: set[int] = field(default_factory=set)
     deleted_keys: list[int] = field(default_factory=list)
+
+
+def count_link_events(events: LinkEvents, before: np.ndarray, after: np.ndarray) -> None:
+    """Count the links deleted and relearnt between two frames into ``events``.
+
+    Args:
+        events: the counts, updated in place.
+        before, after: the links' :func:`pair_keys` before and after the frame.
+    """
+    if len(after) == len(before) + 1 and np.array_equal(after[:-1], before):
+        new, lost = after[-1:], after[:0]  # the common case: one link appended
+    elif np.array_equal(after, before):
+        return
+    else:
+        new = np.setdiff1d(after, before)
+        lost = np.setdiff1d(before, after)
+    for k in lost.tolist():
+        events.deleted += 1
+        events.gone.add(k)
+        events.deleted_keys.append(k)
+    for k in new.tolist():
+        if k in events.gone:
+            events.relearnt += 1
+            events.gone.discard(k)
 
 
 @dataclass(frozen=True)
@@ -124,23 +154,8 @@ class MappingRobot:
     def _count_links(self) -> None:
         store = self.slam.experience_map.store  # type: ignore[attr-defined]
         e = store.e
-        keys = _pair_keys(store.src[:e], store.dst[:e])
-        if len(keys) == len(self._keys) + 1 and np.array_equal(keys[:-1], self._keys):
-            new, lost = keys[-1:], keys[:0]  # the common case: one link appended
-        elif np.array_equal(keys, self._keys):
-            new = lost = keys[:0]
-        else:
-            new = np.setdiff1d(keys, self._keys)
-            lost = np.setdiff1d(self._keys, keys)
-        ev = self.links
-        for k in lost.tolist():
-            ev.deleted += 1
-            ev.gone.add(k)
-            ev.deleted_keys.append(k)
-        for k in new.tolist():
-            if k in ev.gone:
-                ev.relearnt += 1
-                ev.gone.discard(k)
+        keys = pair_keys(store.src[:e], store.dst[:e])
+        count_link_events(self.links, self._keys, keys)
         self._keys = keys
 
     def tick(self, behaviour: int) -> Tick:
@@ -168,6 +183,53 @@ class MappingRobot:
         end = self.time + seconds
         while self.time < end - 1e-9:
             self.tick(self.sim.explore())
+
+    def _open_ways(self) -> nx.Graph:
+        """The passages without an obstacle on them, weighted by length."""
+        o, g = self.office, nx.Graph()
+        for a, b in o.edges.tolist():
+            pa, pb = o.nodes[a], o.nodes[b]
+            pts = pa + np.linspace(0.0, 1.0, 41)[:, None] * (pb - pa)
+            if not self.sim.path_blocked(pts):
+                g.add_edge(a, b, weight=float(np.hypot(*(pb - pa))))
+        return g
+
+    def drive_to(self, name: str, max_s: float = 600.0) -> None:
+        """Drive to node ``name`` the shortest way round the obstacles, as an operator
+        would steer it (ground truth, not the map), mapping every frame.
+
+        Raises:
+            InputError: ``name`` cannot be reached within ``max_s`` seconds.
+        """
+        o = self.office
+        goal = o.node(name)
+        g = self._open_ways()
+        dist = nx.single_source_dijkstra_path_length(g, goal, weight="weight")
+        end = self.time + max_s
+        while float(np.hypot(*(self.sim.pose[:2] - o.nodes[goal]))) > 1e-6:
+            if self.time >= end:
+                raise InputError(f"the robot did not reach {name} in {max_s} s")
+            m, here = self.sim.state, self.sim.pose[:2]
+            ahead = float(np.hypot(*(o.nodes[m.v] - here))) + dist.get(m.v, np.inf)
+            back = float(np.hypot(*(o.nodes[m.u] - here))) + dist.get(m.u, np.inf)
+            line = np.linspace(0.0, 1.0, 21)[:, None]
+            if self.sim.path_blocked(here + line * (o.nodes[m.v] - here)):
+                ahead = np.inf  # the obstacle is ahead on this passage
+            if self.sim.path_blocked(here + line * (o.nodes[m.u] - here)):
+                back = np.inf  # or behind
+            if back < ahead - 1e-9:
+                self.tick(int(Behaviour.TURN_AROUND))
+                continue
+            if m.v == goal:
+                self.tick(int(Behaviour.FOLLOW))
+                continue
+            ways = {b: w for b, w in options(o, m.u, m.v).items() if b is not Behaviour.TURN_AROUND}
+            cost: dict[Behaviour, float] = {
+                b: float(np.hypot(*(o.nodes[w] - o.nodes[m.v]))) + dist.get(w, np.inf)
+                for b, w in ways.items()
+            }
+            best = min(cost, key=lambda b: cost[b]) if cost else Behaviour.TURN_AROUND
+            self.tick(int(best))
 
     def trajectory(self) -> np.ndarray:
         """Ground-truth poses of every frame, (F, 3)."""

@@ -36,7 +36,8 @@ def climb_route(tmap: TemporalMap, adj: Adjacency, goal: int) -> Route:
 
     Args:
         tmap: the temporal map seeded at the current (peak) experience.
-        adj: the adjacency it was computed on.
+        adj: the adjacency it was computed on (for a directed one, its transpose: the
+            links into each experience).
         goal: the goal experience.
 
     Returns:

@@ -3,8 +3,8 @@
 The peak experience is seeded with time 0 and every other one with "a very large value";
 an experience ``i`` proposes ``tau_j = t_i + t_ij`` to every linked ``j`` (Eq. 10) and
 ``j`` keeps the smallest proposal (Eq. 11). Processing experiences in increasing time
-order (a binary heap) reaches the paper's fixed point after visiting each experience
-once; each visit relaxes all of its links in one numpy operation on a CSR adjacency.
+order (a binary heap, compiled with numba: ``_dijkstra.py``) reaches the paper's fixed
+point after visiting each experience once, relaxing its links on a CSR adjacency.
 
 Example:
     >>> import numpy as np
@@ -16,7 +16,6 @@ Example:
 
 from __future__ import annotations
 
-import heapq
 from dataclasses import dataclass
 
 import numpy as np
@@ -143,29 +142,12 @@ def temporal_map(
         raise InputError(f"adjacency has {adj.num_nodes} experiences, expected {num_nodes}")
     if not 0 <= start < num_nodes:
         raise InputError(f"start experience {start} is not in [0, {num_nodes})")
-    t = np.full(num_nodes, np.inf)
-    parent = np.full(num_nodes, -1, dtype=np.int64)
-    done = np.zeros(num_nodes, dtype=bool)
-    t[start] = 0.0
-    heap: list[tuple[float, int]] = [(0.0, start)]
-    while heap:  # one visit per experience; its links relax in one array operation
-        ti, i = heapq.heappop(heap)
-        if done[i]:
-            continue
-        done[i] = True
-        nbr, w = adj.neighbours(i)
-        tau = ti + w  # Eq. 10
-        better = tau < t[nbr]  # Eq. 11
-        if not better.any():
-            continue
-        j, tj = nbr[better], tau[better]
-        if len(j) > 1:  # a neighbour listed twice keeps its smallest proposal
-            order = np.lexsort((tj, j))
-            j, tj = j[order], tj[order]
-            first = np.concatenate([[True], j[1:] != j[:-1]])
-            j, tj = j[first], tj[first]
-        t[j] = tj
-        parent[j] = i
-        for tv, jv in zip(tj.tolist(), j.tolist()):
-            heapq.heappush(heap, (tv, jv))
+    from ratslam_graph.navigation._dijkstra import dijkstra  # numba: imported lazily
+
+    t, parent = dijkstra(
+        adj.indptr.astype(np.int64),
+        adj.nbr.astype(np.int64),
+        adj.time.astype(np.float64),
+        int(start),
+    )
     return TemporalMap(start=int(start), times=t, parent=parent)

@@ -20,14 +20,22 @@ def test_goal_recall_quick_reaches_goals_on_a_small_floor(tmp_path):
     assert sum(t["reached"] for t in trials) >= len(trials) - 1
     for t in trials:
         if t["reached"]:
-            assert t["path_m"] >= 0.5 * t["shortest_m"]
+            assert 0.5 * t["shortest_m"] <= t["path_m"] <= 6.0 * t["shortest_m"]
     for f in d["figures"]:
         assert (tmp_path / f).stat().st_size > 0
 
 
-def test_adaptation_quick_deletes_links_and_reaches_the_goal(tmp_path):
+def test_adaptation_quick_behaves_as_the_paper_reports(tmp_path):
     d = _run("edge/adaptation", tmp_path)
-    trials = d["details"]["trials"]
-    assert [t["trial"] for t in trials] == [1, 2, 3]
-    assert d["details"]["links_deleted_total"] > 0
-    assert trials[2]["reached"]
+    t1, t2, t3 = d["details"]["trials"]
+    assert [t["trial"] for t in (t1, t2, t3)] == [1, 2, 3]
+    # trial 1: planned through the obstacle, links near it deleted, reached the other way
+    assert t1["planned_through_obstacle"]
+    assert t1["links_deleted"] > 0
+    assert t1["reached"] and t1["route"] == "long"
+    # trial 2: the long route at once
+    assert not t2["planned_through_obstacle"]
+    assert t2["reached"] and t2["route"] == "long"
+    # trial 3: obstacle removed, path driven again: the short route
+    assert t3["reached"] and t3["route"] == "short"
+    assert t3["path_m"] < t1["path_m"]
