@@ -117,10 +117,19 @@ def register(subparsers: Any) -> argparse.ArgumentParser:
         "matched the stored map into their matches too; a deviation, e.g. --merge-absorb",
     )
     p.add_argument(
+        "--merge-anchor",
+        choices=("template", "view"),
+        default=None,
+        help="where a merge joins the maps (default template: the partial template that "
+        "matched, the paper's; view, the default with --recommended-merge: the frame whose "
+        "view matches the stored template best); a deviation when view, e.g. "
+        "--merge-anchor view",
+    )
+    p.add_argument(
         "--recommended-merge",
         action="store_true",
         help="the merge measured best across seeds: --pc-shift-rotate --merge-persist 2 "
-        "--merge-absorb (docs/multisession.md), e.g. --recommended-merge",
+        "--merge-absorb --merge-anchor view (docs/multisession.md), e.g. --recommended-merge",
     )
     p.add_argument(
         "--max-frames",
@@ -242,6 +251,7 @@ def _seeds_main(args: argparse.Namespace, overrides: dict[str, str], merge: dict
         merge_threshold=args.merge_threshold,
         merge_persist=args.merge_persist,
         merge_absorb=args.merge_absorb,
+        merge_anchor=args.merge_anchor,
     )
     text = seed_table_markdown(table)
     atomic_write_text(out / "seeds.json", json.dumps(table, indent=1) + "\n")
@@ -254,6 +264,7 @@ def _seeds_main(args: argparse.Namespace, overrides: dict[str, str], merge: dict
 def main(args: argparse.Namespace) -> int:
     from torchratslam.errors import ConfigError
     from torchratslam.experiments.multisession_report import report_markdown
+    from torchratslam.experiments.multisession_seeds import RECOMMENDED_SESSION_OPTIONS
 
     backends = tuple(b.strip() for b in args.backends.split(",") if b.strip())
     overrides = {}
@@ -270,6 +281,10 @@ def main(args: argparse.Namespace) -> int:
     if args.recommended_merge:
         args.pc_shift_rotate, args.merge_absorb = True, True
         args.merge_persist = max(args.merge_persist, 2)
+        if args.merge_anchor is None:
+            args.merge_anchor = RECOMMENDED_SESSION_OPTIONS["merge_anchor"]
+    if args.merge_anchor is None:
+        args.merge_anchor = "template"
     if args.pc_shift_rotate:
         merge["pc_shift_rotate"] = True
     with _Running(Path(args.out), args.overwrite):
@@ -305,6 +320,7 @@ def _experiment(
             merge_threshold=args.merge_threshold,
             merge_persist=args.merge_persist,
             merge_absorb=args.merge_absorb,
+            merge_anchor=args.merge_anchor,
             rerun=args.rerun,
             rerun_save=args.rerun_save,
         ),

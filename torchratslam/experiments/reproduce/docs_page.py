@@ -23,9 +23,29 @@ from ratslam_graph.atomic import atomic_write_text
 from torchratslam.errors import InputError
 from torchratslam.experiments.reproduce.report import PAPERS, format_cell
 
-__all__ = ["main", "write_page"]
+__all__ = ["PAGE_FIGURES", "copy_figure", "main", "write_page"]
 
 REGENERATE = "python -m torchratslam.experiments.reproduce.docs_page --run --quick --out out/papers"
+PAGE_FIGURES = 3
+"""Figures shown per experiment: the report's first ones (each experiment lists its
+main figures first); the others are named, to keep the committed images small."""
+
+
+def copy_figure(src: Path, dest: Path) -> Path:
+    """Copy a figure for the page: a PNG is stored with a 256-colour palette (plots have
+    few colours; about a third of the bytes), anything else, or a PNG that cannot be
+    read, byte for byte."""
+    if src.suffix.lower() == ".png":
+        try:
+            from PIL import Image
+
+            with Image.open(src) as im:
+                im.convert("RGB").quantize(colors=256).save(dest, format="PNG", optimize=True)
+            return dest
+        except (OSError, ValueError):
+            pass  # not an image PIL reads: copied as it is
+    shutil.copyfile(src, dest)
+    return dest
 
 
 def _experiment(rep: dict[str, Any], folder: Path, img: Path, seconds: float) -> list[str]:
@@ -42,13 +62,14 @@ def _experiment(rep: dict[str, Any], folder: Path, img: Path, seconds: float) ->
     if rep.get("differences"):
         lines += ["", "What differs and why:", ""]
         lines += [f"- {d}" for d in rep["differences"]]
-    for fig in rep.get("figures", []):
-        src = folder / fig
-        if not src.is_file():
-            continue
+    figures = [f for f in rep.get("figures", []) if (folder / f).is_file()]
+    for fig in figures[:PAGE_FIGURES]:
         dest = img / f"{exp.replace('/', '_')}_{Path(fig).name}"
-        shutil.copyfile(src, dest)
+        copy_figure(folder / fig, dest)
         lines += ["", f"![{exp}: {Path(fig).stem}](img/reproduce/{dest.name})"]
+    if figures[PAGE_FIGURES:]:
+        names = ", ".join(f"`{Path(f).name}`" for f in figures[PAGE_FIGURES:])
+        lines += ["", f"The run also draws {names} (not copied here)."]
     return [*lines, ""]
 
 
@@ -66,7 +87,9 @@ def write_page(results: Path, page: Path, img: Path) -> Path:
     if img.exists():
         shutil.rmtree(img)
     img.mkdir(parents=True)
-    quick = False
+    quick: list[str] = []
+    done = 0
+    total = 0.0
     by_paper: dict[str, list[str]] = {}
     for entry in index:
         exp = entry["experiment"]
@@ -76,8 +99,12 @@ def write_page(results: Path, page: Path, img: Path) -> Path:
             section = [f"### `{exp}`", "", f"Failed: {entry['error']}", ""]
         else:
             rep = json.loads((folder / "report.json").read_text())
-            quick = quick or bool(rep.get("quick"))
-            section = _experiment(rep, folder, img, float(entry.get("seconds", 0.0)))
+            done += 1
+            if rep.get("quick"):
+                quick.append(exp)
+            seconds = float(entry.get("seconds", 0.0))
+            total += seconds
+            section = _experiment(rep, folder, img, seconds)
         by_paper.setdefault(paper, []).extend(section)
     lines = [
         "# Reproducing the papers",
@@ -88,7 +115,7 @@ def write_page(results: Path, page: Path, img: Path) -> Path:
         "experiment says what differs and why.",
         "",
     ]
-    if quick:
+    if quick and len(quick) == done:
         lines += [
             "!!! note",
             "    This page shows the quick versions (smaller data, minutes in all); "
@@ -96,9 +123,19 @@ def write_page(results: Path, page: Path, img: Path) -> Path:
             "sizes.",
             "",
         ]
+    elif quick:
+        names = ", ".join(f"`{q}`" for q in quick)
+        lines += [
+            "!!! note",
+            f"    The full versions (the papers' sizes) except {names}: those show their "
+            "quick versions (smaller data); `torchratslam reproduce ID --out DIR` without "
+            "`--quick` runs their full size.",
+            "",
+        ]
+    command = REGENERATE if quick else REGENERATE.replace(" --quick", "")
     lines += [
-        f"This page is generated: `{REGENERATE}` (or `--from DIR` to read a finished "
-        "`reproduce all --out DIR`).",
+        f"This page is generated: `{command}` (or `--from DIR` to read a finished "
+        f"`reproduce all --out DIR`); its runs took {total / 60:.0f} min.",
         "",
     ]
     for paper in [*PAPERS, *sorted(set(by_paper) - set(PAPERS))]:

@@ -110,3 +110,38 @@ def test_pose_cells_move_with_the_merge(tmp_path):
     # session 1's 3/4 lap leaves part of the heading axis empty
     assert loaded.ours < single.ours <= single.paper
     assert report.figures == ("fig11_pose_cells.png",)
+
+
+def test_held_out_rows_sit_beside_the_papers_claim():
+    """The held-out seed table as report rows: per seed the counts (the paper: "the
+    same") and the largest merge distance (NaN when a seed did not merge), then the
+    seeds within one experience and the merges more than 1 m off, from the table."""
+    from torchratslam.experiments.reproduce.multisession import HELD_OUT_SEEDS, held_out_rows
+
+    assert HELD_OUT_SEEDS == tuple(range(3000, 3010))
+
+    def merge(d):
+        return {"distance_m": d}
+
+    table = {
+        "seeds": [3000, 3001],
+        "rows": {
+            3000: {"multi": 35, "single": 34, "merges": [merge(0.4), merge(1.2)]},
+            3001: {"multi": 30, "single": 33, "merges": []},
+        },
+        "within_one": 1,
+        "wrong_merges": 1,
+        "ablation_above": 1,
+        "ablation_reachable": 2,
+    }
+    rows = {r.name: r for r in held_out_rows(table)}
+    counts = rows["seed 3000: experiences, recommended merge / continuous single session"]
+    assert counts.paper == "the same" and counts.ours == "35 / 34"
+    assert rows["seed 3000: largest merge distance (ground truth)"].ours == 1.2
+    assert rows["seed 3001: largest merge distance (ground truth)"].ours is None
+    within = rows["held-out seeds within one experience of the continuous single session"]
+    assert within.ours == "1/2" and within.paper == "2/2 (the same number)"
+    wrong = rows["held-out seeds: merges more than 1 m off (ground truth)"]
+    assert wrong.paper == 0 and wrong.ours == 1
+    abl = rows["held-out seeds: without the pose-cell shift at least 10% more experiences"]
+    assert abl.ours.startswith("1/2")

@@ -40,6 +40,11 @@ def test_recoded_lv_quick_reports_speed_and_map_difference(tmp_path):
     assert 0 <= r["frames whose template differs"].ours < 20  # mostly the same decisions
     assert r["LibICP residual, recoded map onto the exact one"].ours >= 0
     assert report.details["frames"] == 200
+    # the last difference says which search was faster, with the measured times
+    note = report.differences[-1]
+    faster = "times faster" in note
+    assert faster == (rec_ms < exact_ms) and ("slower" in note) == (not faster)
+    assert f"{rec_ms:.2f} against {exact_ms:.2f} ms per frame" in note
     assert (tmp_path / "fig7_8_local_view_time.png").stat().st_size > 0
 
 
