@@ -34,7 +34,7 @@ from ratslam_graph.navigation.recovery import (
     RecoveryState,
     track_route,
 )
-from ratslam_graph.navigation.route import route_positions
+from ratslam_graph.navigation.route import joined_positions
 from torchratslam.navigation.params import NavParams
 from torchratslam.navigation.planner import arbitrate, local_options, map_pose, plan_route
 from torchratslam.navigation.robot import MappingRobot
@@ -183,7 +183,7 @@ class NavigationAgent:
         while r.time - t0 < limit and not self._arrived(goal):
             now = r.time
             if r.exp_id != last_exp or now - last_plan >= p.replan_s:
-                plan = plan_route(self.em, goal.exp)
+                plan = plan_route(self.em, goal.exp, turns=p.junction_turns)
                 ms.append(plan.ms)
                 state = track_route(state, plan.route, now, rec)
                 last_exp, last_plan = r.exp_id, now
@@ -202,7 +202,10 @@ class NavigationAgent:
                     ids = route.ids[max(k - 1, 0) :]
                 else:
                     ids = route.ids
-                xy = route_positions(self.em.poses, type(route)(ids=ids, times=[0.0] * len(ids)))
+                links = self.em.store
+                xy = joined_positions(
+                    self.em.poses, np.asarray(ids), links.src[: links.e], links.dst[: links.e]
+                )
                 m = sim.state
                 opts = local_options(o, sim.local_paths(), m.u, m.v, sim.params.motion.path_step)
                 b, _ = arbitrate(
@@ -213,6 +216,7 @@ class NavigationAgent:
                     lookahead_m=p.lookahead_m,
                     turn_margin_m=p.turn_margin_m,
                     allow_turn=now >= turn_ok,
+                    from_robot=p.junction_turns,
                 )
                 if b is Behaviour.TURN_AROUND:
                     turn_ok = now + p.turn_cooldown_s

@@ -40,6 +40,11 @@ class NavParams:
         overlap_m: experiences this close to the robot's map pose (facing its way) are
             other representations of its place: the planner seeds them and a blocked
             transition counts against their links.
+        junction_turns: routes may turn at junctions from one representation onto
+            another (``plan_route(..., turns=True)``) and arbitration compares the local
+            paths with the route's shape from the robot on (``arbitrate(...,
+            from_robot=True)``); needed where a route must take a turn the robot never
+            drove there (edge/adaptation).
     """
 
     lookahead_m: float = 3.0
@@ -54,6 +59,7 @@ class NavParams:
     time_slack_s: float = 60.0
     junction_m: float = 1.5
     overlap_m: float = 1.0
+    junction_turns: bool = False
 
     def __post_init__(self) -> None:
         for name in (

@@ -1,8 +1,10 @@
 """Route planning and behaviour arbitration on the experience map (Section IV).
 
 :func:`plan_route` seeds the temporal map at the current (peak) experience (Eqs.
-10-11) and climbs it from the goal; :func:`map_pose` is the robot's pose in the
-experience map (its current experience plus the odometry since);
+10-11) and climbs it from the goal, following the links the way they were driven and
+turning at junctions from one representation onto another (:func:`turn_pairs`);
+:func:`map_pose` is the robot's pose in the experience map (its current experience plus
+the odometry since);
 :func:`arbitrate` brings the local movement paths (egocentric, from the local movement
 module) into the map's frame and chooses the one closest to the route (Fig. 7).
 
@@ -31,7 +33,15 @@ from ratslam_graph.navigation.temporal import TemporalMap, adjacency, temporal_m
 from torchratslam.sim.office.builder import Office
 from torchratslam.sim.office.motion import Behaviour, options
 
-__all__ = ["Plan", "arbitrate", "local_options", "map_pose", "plan_route", "to_map_frame"]
+__all__ = [
+    "Plan",
+    "arbitrate",
+    "local_options",
+    "map_pose",
+    "plan_route",
+    "to_map_frame",
+    "turn_pairs",
+]
 
 
 @dataclass(frozen=True)
@@ -58,6 +68,9 @@ def plan_route(
     speed: float = 0.5,
     turn_rate: float = np.pi / 2,
     directed: bool = True,
+    turns: bool = False,
+    min_turn: float = np.pi / 4,
+    min_step_m: float = 0.05,
 ) -> Plan:
     """The temporal map from the robot's place and the route to ``goal``.
 
@@ -77,6 +90,16 @@ def plan_route(
         directed: each link leads only the way it was driven, from ``src`` with its
             behaviour to ``dst``: a route is then a chain of behaviours the robot has
             executed, each monitored by Eq. 9. False: links both ways.
+        turns: True: a route may also turn from an experience onto one that overlaps it
+            (within ``radius_m``) facing a crossing way (``min_turn`` to ``pi -
+            min_turn`` rad away), at the time the turn takes: the grouping of the start
+            and the goal, at the junctions along the route. A junction's
+            representations (one per heading it was passed with) are then joined in
+            every combination, not only in the ones driven. Experiences facing the same
+            or the opposite way are not joined, nor two turns chained, so a route never
+            steps along a corridor past a deleted link (see :func:`turn_pairs`).
+        min_step_m: experiences with no link of at least this length (m) were learnt
+            turning on the spot and take no turns.
     """
     links = em.store
     n, e = links.n, links.e
@@ -93,19 +116,106 @@ def plan_route(
     w = links.link[:e, 3]
     if not directed:
         s, g, w = np.concatenate([s, g]), np.concatenate([g, s]), np.concatenate([w, w])
-    src = np.concatenate([s, np.full(len(near), n), at_goal])
-    dst = np.concatenate([g, near, np.full(len(at_goal), n + 1)])
-    dt = np.concatenate([w, d[near] / speed + turn[near] / turn_rate, dg[at_goal] / speed])
+    layers = 2 if turns else 1
+    if turns:  # a turn from one representation of a place onto another
+        step = links.link[:e, 0] >= min_step_m
+        moving = np.zeros(n, dtype=bool)
+        moving[links.src[:e][step]] = True
+        moving[links.dst[:e][step]] = True
+        a, b = turn_pairs(poses[:n], radius_m, min_turn, moving)
+        gap = np.hypot(*(poses[a, :2] - poses[b, :2]).T)
+        rot = np.abs(wrap_angle(poses[a, 2] - poses[b, 2]))
+        # a turn lands on the second layer (n + j), which leads on by j's links only:
+        # a route never turns twice in a row (never skips along a corridor by turning
+        # round and back)
+        s, g, w = (
+            np.concatenate([s, s + n, a]),
+            np.concatenate([g, g, b + n]),
+            np.concatenate([w, w, gap / speed + rot / turn_rate]),
+        )
+        seeds = near + n  # the start is itself a turn onto the robot's place
+        goals = np.concatenate([at_goal, at_goal + n])
+    else:
+        seeds, goals = near, at_goal
+    m = layers * n
+    src = np.concatenate([s, np.full(len(near), m), goals])
+    dst = np.concatenate([g, seeds, np.full(len(goals), m + 1)])
+    dgoal = dg[at_goal] / speed
+    dt = np.concatenate([w, d[near] / speed + turn[near] / turn_rate, np.tile(dgoal, layers)])
     # the two extra nodes are linked one way only: out of the robot's place, into the
     # goal (no shortcut through either)
-    tmap = temporal_map(n + 2, start=n, adj=adjacency(n + 2, src, dst, dt, directed=True))
+    tmap = temporal_map(m + 2, start=m, adj=adjacency(m + 2, src, dst, dt, directed=True))
     ms = 1000.0 * (time.perf_counter() - t0)
     try:  # the climb follows the links into each experience
-        full = climb_route(tmap, adjacency(n + 2, dst, src, dt, directed=True), n + 1)
-        route: Route | None = Route(ids=full.ids[1:-1], times=full.times[1:-1])
+        full = climb_route(tmap, adjacency(m + 2, dst, src, dt, directed=True), m + 1)
+        ids = [i % n for i in full.ids[1:-1]]
+        route: Route | None = Route(ids=ids, times=full.times[1:-1])
     except GraphError:
         route = None
+    if turns:
+        tmap = _fold(tmap, n)
     return Plan(route, tmap, ms)
+
+
+def _fold(tmap: TemporalMap, n: int) -> TemporalMap:
+    """The two-layer temporal map as one time stamp per experience (the earlier of its
+    two nodes), then the start and goal nodes."""
+    t, par = tmap.times, tmap.parent
+    second = t[n : 2 * n] < t[:n]
+    times = np.concatenate([np.where(second, t[n : 2 * n], t[:n]), t[2 * n :]])
+    parent = np.concatenate([np.where(second, par[n : 2 * n], par[:n]), par[2 * n :]])
+    parent = np.where(parent >= n, parent - n, parent)  # j' is j; the extras follow
+    return TemporalMap(start=n, times=times, parent=parent)
+
+
+def turn_pairs(
+    poses: np.ndarray,
+    radius_m: float,
+    min_turn: float,
+    moving: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Ordered pairs ``(i, j)`` of experiences within ``radius_m`` of each other whose
+    headings differ by more than ``min_turn`` and less than ``pi - min_turn`` (rad): the
+    turns from one way onto a crossing one, where two ways meet.
+
+    Turning around is left out, and so are experiences the robot did not drive through
+    (``moving`` False: learnt while it turned on the spot, facing no way out): along a
+    corridor driven both ways, turns around and back (or onto a half-turned experience
+    and off it) would step the route along, up to ``radius_m`` at a time, where no link
+    leads. Only where ways cross do experiences face across each other.
+
+    Experiences are binned on a grid of ``radius_m`` cells and compared with the 9 cells
+    around their own (one sorted search per neighbouring cell, no loop over experiences).
+
+    Shape:
+        poses: (N, 3) ``[x, y, th]``; moving: (N,) bool. Returns two (P,) int64 arrays.
+    """
+    xy = np.asarray(poses, np.float64).reshape(-1, 3)
+    n = len(xy)
+    cell = np.floor(xy[:, :2] / radius_m).astype(np.int64)
+    cell -= cell.min(axis=0) if n else 0
+    span = int(cell[:, 1].max()) + 3 if n else 3
+    key = (cell[:, 0] + 1) * span + cell[:, 1] + 1
+    order = np.argsort(key, kind="stable")
+    sk = key[order]
+    src, dst = [np.zeros(0, np.int64)], [np.zeros(0, np.int64)]
+    for dx in (-1, 0, 1):
+        for dy in (-1, 0, 1):
+            want = key + dx * span + dy
+            lo = np.searchsorted(sk, want, side="left")
+            cnt = np.searchsorted(sk, want, side="right") - lo
+            i = np.repeat(np.arange(n), cnt)
+            first = np.repeat(np.cumsum(cnt) - cnt, cnt)
+            j = order[np.repeat(lo, cnt) + np.arange(len(i)) - first]
+            src.append(i)
+            dst.append(j)
+    a, b = np.concatenate(src), np.concatenate(dst)
+    d = np.hypot(*(xy[a, :2] - xy[b, :2]).T)
+    rot = np.abs(wrap_angle(xy[a, 2] - xy[b, 2]))
+    keep = (a != b) & (d <= radius_m) & (rot > min_turn) & (rot < np.pi - min_turn)
+    if moving is not None:
+        keep &= moving[a] & moving[b]
+    return a[keep], b[keep]
 
 
 def map_pose(em: ExperienceMap) -> np.ndarray:
@@ -127,10 +237,15 @@ def to_map_frame(points: np.ndarray, world_pose: np.ndarray, est_pose: np.ndarra
     return np.stack([c * d[:, 0] - s * d[:, 1], s * d[:, 0] + c * d[:, 1]], 1) + est_pose[:2]
 
 
-def _ahead_of_robot(route_xy: np.ndarray, here: np.ndarray, window: int = 6) -> np.ndarray:
+def _ahead_of_robot(
+    route_xy: np.ndarray, here: np.ndarray, window: int = 6, *, from_robot: bool = False
+) -> np.ndarray:
     """The route from its node nearest the robot (among the first ``window``) on, with
-    the robot's position first."""
+    the robot's position first; ``from_robot``: moved so that node lies on the robot's
+    position (the route's shape ahead of the robot, not its offset in the map)."""
     k = int(np.argmin(np.hypot(*(route_xy[:window] - here).T)))
+    if from_robot:
+        return route_xy[k:] - route_xy[k] + here
     return np.vstack([here[None, :], route_xy[k + 1 :]]) if k + 1 < len(route_xy) else here[None]
 
 
@@ -161,6 +276,7 @@ def arbitrate(
     lookahead_m: float,
     turn_margin_m: float,
     allow_turn: bool = True,
+    from_robot: bool = False,
 ) -> tuple[Behaviour, dict[Behaviour, float]]:
     """The behaviour whose local path is closest to the route (Fig. 7).
 
@@ -178,6 +294,10 @@ def arbitrate(
         lookahead_m: length compared.
         turn_margin_m: the turn-around's handicap (m).
         allow_turn: False rules turning around out (unless nothing else is offered).
+        from_robot: compare with the route's shape from the robot on (its experience
+            nearest the robot moved onto the robot's map position), not with its map
+            positions: the map can hold two representations of a junction metres
+            apart, and a turn held behind the robot then looks like a route back.
 
     Shape:
         route_xy: (R, 2).
@@ -186,7 +306,8 @@ def arbitrate(
         The behaviour and each behaviour's distance (m, the handicap included).
     """
     route = route_ahead(
-        _ahead_of_robot(np.asarray(route_xy, np.float64), est_pose[:2]), lookahead_m
+        _ahead_of_robot(np.asarray(route_xy, np.float64), est_pose[:2], from_robot=from_robot),
+        lookahead_m,
     )
     here = world_pose[:2][None, :]
     offered = [(b, p) for b, p in paths if allow_turn or b is not Behaviour.TURN_AROUND]

@@ -28,7 +28,7 @@ from ratslam_graph.errors import GraphError, InputError
 from ratslam_graph.features import Route
 from ratslam_graph.navigation.temporal import Adjacency, TemporalMap
 
-__all__ = ["climb_route", "dijkstra_route", "route_positions"]
+__all__ = ["climb_route", "dijkstra_route", "joined_positions", "route_positions"]
 
 
 def climb_route(tmap: TemporalMap, adj: Adjacency, goal: int) -> Route:
@@ -109,3 +109,32 @@ def route_positions(poses: np.ndarray, route: Route) -> np.ndarray:
     """
     p = np.asarray(poses, dtype=np.float64).reshape(-1, 3)
     return p[np.asarray(route.ids, dtype=np.int64), :2]
+
+
+def joined_positions(
+    poses: np.ndarray, ids: np.ndarray, src: np.ndarray, dst: np.ndarray
+) -> np.ndarray:
+    """The route's ``(x, y)`` with its steps between overlapping representations of one
+    place closed up.
+
+    A step ``i -> j`` that no link joins (either way) is a turn from one representation
+    of a place onto another: the map may hold the two apart by up to the overlap
+    radius, or further where no driven link ties them together. The rest of the route
+    is shifted so that ``j`` lies on ``i``: past the step the route keeps the shape of
+    the links it follows, not the offset between the two representations.
+
+    Shape:
+        poses: (N, 3); ids: (R,); src, dst: (E,) the links. Returns (R, 2).
+    """
+    p = np.asarray(poses, dtype=np.float64).reshape(-1, 3)[:, :2]
+    r = np.asarray(ids, dtype=np.int64).reshape(-1)
+    xy = p[r]
+    if len(r) < 2:
+        return xy
+    n = np.int64(len(p))
+    s, d = np.asarray(src, dtype=np.int64), np.asarray(dst, dtype=np.int64)
+    keys = np.concatenate([s * n + d, d * n + s])
+    step = r[:-1] * n + r[1:]
+    turn = ~np.isin(step, keys)
+    jump = np.where(turn[:, None], xy[:-1] - xy[1:], 0.0)
+    return xy + np.vstack([np.zeros((1, 2)), np.cumsum(jump, axis=0)])

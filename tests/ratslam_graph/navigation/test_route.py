@@ -7,7 +7,12 @@ import numpy as np
 import pytest
 
 from ratslam_graph.errors import GraphError
-from ratslam_graph.navigation.route import climb_route, dijkstra_route, route_positions
+from ratslam_graph.navigation.route import (
+    climb_route,
+    dijkstra_route,
+    joined_positions,
+    route_positions,
+)
 from ratslam_graph.navigation.temporal import adjacency, temporal_map
 
 
@@ -67,3 +72,17 @@ def test_route_positions_follow_the_ids():
     r = climb_route(temporal_map(3, start=2, adj=adj), adj, 0)
     assert r.ids == [2, 1, 0]
     np.testing.assert_array_equal(route_positions(poses, r), poses[[2, 1, 0], :2])
+
+
+def test_joined_positions_close_up_the_steps_that_no_link_joins():
+    poses = np.array(
+        [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.5, 0.8, 1.6], [1.5, 1.8, 1.6], [1.5, 2.8, 1.6]]
+    )
+    src, dst = np.array([0, 3, 2]), np.array([1, 4, 3])  # 1 -> 2 is a turn, no link
+    xy = joined_positions(poses, np.arange(5), src, dst)
+    shift = poses[1, :2] - poses[2, :2]
+    np.testing.assert_allclose(xy[:2], poses[:2, :2])
+    np.testing.assert_allclose(xy[2:], poses[2:, :2] + shift)  # 2 lies on 1, the rest follows
+    # a link either way is no turn: the positions are the map's
+    both = joined_positions(poses, np.arange(5), np.array([0, 2, 2, 3]), np.array([1, 1, 3, 4]))
+    np.testing.assert_allclose(both, poses[:, :2])

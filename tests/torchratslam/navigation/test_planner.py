@@ -5,9 +5,10 @@ import itertools
 import numpy as np
 
 from ratslam_graph.experience_map import ExperienceMap
+from ratslam_graph.geometry import wrap_angle
 from ratslam_graph.params import ExperienceMapParams
 from torchratslam.navigation.labels import LabelState, next_label
-from torchratslam.navigation.planner import arbitrate, plan_route, to_map_frame
+from torchratslam.navigation.planner import arbitrate, plan_route, to_map_frame, turn_pairs
 from torchratslam.sim.office.motion import Behaviour
 
 
@@ -73,3 +74,88 @@ def test_no_route_takes_a_shortcut_through_the_goal_or_the_start():
     assert ids[-1] in range(5) and ids[0] in range(2, 6)
     assert all(a - b == 1 for a, b in itertools.pairwise(ids))  # along the chain's links
     assert np.all(np.diff(plan.route.times) > 0)
+
+
+def _chain(em: ExperienceMap, xy: np.ndarray, th: float) -> list[int]:
+    """Experiences at ``xy`` facing ``th``, linked in order (driven at 0.5 m/s)."""
+    ids = [em.store.add_experience(float(x), float(y), th) for x, y in xy]
+    for a, b in itertools.pairwise(ids):
+        d = float(np.hypot(*(em.poses[b, :2] - em.poses[a, :2])))
+        em.store.add_link(a, b, d, 0.0, 0.0, d / 0.5)
+    return ids
+
+
+def test_turn_pairs_match_a_brute_force_search():
+    rng = np.random.default_rng(3)
+    poses = np.c_[rng.uniform(-4, 4, (250, 2)), rng.uniform(-np.pi, np.pi, 250)]
+    moving = rng.random(250) < 0.8
+    a, b = turn_pairs(poses, 1.0, np.pi / 4, moving)
+    want = set()
+    for i, j in itertools.permutations(range(250), 2):
+        rot = abs(wrap_angle(poses[i, 2] - poses[j, 2]))
+        near = np.hypot(*(poses[i, :2] - poses[j, :2])) <= 1.0
+        if near and np.pi / 4 < rot < 3 * np.pi / 4 and moving[i] and moving[j]:
+            want.add((i, j))
+    assert set(zip(a.tolist(), b.tolist())) == want and len(a) == len(want)
+
+
+def test_a_route_turns_where_two_ways_cross_though_that_turn_was_never_driven():
+    em = ExperienceMap(ExperienceMapParams(exp_initial_em_deg=0.0, exp_link_time="per_link"))
+    south = _chain(em, np.c_[np.zeros(4), [3.0, 2.0, 1.0, 0.3]], -np.pi / 2)
+    east = _chain(em, np.c_[[0.4, 1.4, 2.4, 3.4], np.zeros(4)], 0.0)  # from the junction on
+    em.set_current(south[0])
+    assert plan_route(em, east[-1], turns=False).route is None
+    plan = plan_route(em, east[-1], turns=True)
+    assert plan.route is not None
+    ids = plan.route.ids
+    assert ids[0] == south[0] and ids[-1] in east  # (the goal's place: within 1 m of it)
+    k = next(i for i, x in enumerate(ids) if x in east)  # one turn, south onto east
+    assert ids[:k] == south[:k] and ids[k:] == east[east.index(ids[k]) : east.index(ids[-1]) + 1]
+    assert np.hypot(*(em.poses[ids[k - 1], :2] - em.poses[ids[k], :2])) <= 1.0
+    assert np.all(np.isfinite(plan.tmap.times[: em.store.n]))  # one time per experience
+
+
+def test_no_route_steps_along_a_corridor_past_a_missing_link_by_turning():
+    em = ExperienceMap(ExperienceMapParams(exp_initial_em_deg=0.0, exp_link_time="per_link"))
+    x = np.arange(0.0, 6.01, 0.25)
+    cut = int(np.flatnonzero(x == 3.0)[0])
+    west = _chain(em, np.c_[x[::-1] + 0.1, np.full(len(x), 0.05)], np.pi)  # driven west
+    east1 = _chain(em, np.c_[x[:cut], np.zeros(cut)], 0.0)  # east, up to the cut
+    east2 = _chain(em, np.c_[x[cut:], np.zeros(len(x) - cut)], 0.0)  # on from it
+    # a turn on the spot just short of the cut: half-turned experiences, linked by 0 m
+    turning = [em.store.add_experience(2.9, 0.0, th) for th in np.linspace(0.3, 2.8, 6)]
+    for a, b in itertools.pairwise([east1[-1], *turning, west[x.size - cut]]):
+        em.store.add_link(a, b, 0.0, 0.0, 0.0, 0.3)
+    em.set_current(east1[0])
+    assert plan_route(em, east2[-1], turns=True).route is None  # turning never passes
+    assert plan_route(em, east2[-1], directed=False).route is not None  # links both ways do
+
+
+def test_arbitration_follows_the_route_s_shape_from_the_robot_not_its_offset():
+    # the map holds the route's turn 2.5 m behind the robot (two representations of a
+    # junction apart in the map): the route turns left where the robot is
+    pose = np.zeros(3)
+    route = np.array([[-2.5, 0.0], [-2.5, 1.0], [-2.5, 2.0], [-2.5, 3.0]])
+    s = np.linspace(0.1, 3.0, 30)[:, None]
+    paths = [
+        (
+            Behaviour.LEFT,
+            np.vstack([np.c_[s[:5, 0] * 0.7 / 0.5, 0 * s[:5, 0]], [0.7, 0] + s * [0, 1]]),
+        ),
+        (
+            Behaviour.RIGHT,
+            np.vstack([np.c_[s[:5, 0] * 0.7 / 0.5, 0 * s[:5, 0]], [0.7, 0] - s * [0, 1]]),
+        ),
+        (Behaviour.TURN_AROUND, -s * [1, 0]),
+    ]
+    b, d = arbitrate(paths, pose, pose, route, lookahead_m=3.0, turn_margin_m=0.6, from_robot=True)
+    assert b is Behaviour.LEFT and d[Behaviour.LEFT] < d[Behaviour.RIGHT]
+    # the same route placed on the robot: the same choice
+    moved = route - route[0]
+    b2, d2 = arbitrate(
+        paths, pose, pose, moved, lookahead_m=3.0, turn_margin_m=0.6, from_robot=True
+    )
+    assert b2 is b and d2 == d
+    # by map positions the route looks like the way back
+    b3, _ = arbitrate(paths, pose, pose, route, lookahead_m=3.0, turn_margin_m=0.6)
+    assert b3 is Behaviour.TURN_AROUND

@@ -16,7 +16,7 @@ import numpy as np
 
 from torchratslam.experiments.reproduce.report import Experiment, ExperimentContext, Report, Row
 from torchratslam.navigation.agent import Goal, NavigationAgent, Trial
-from torchratslam.navigation.params import office_config
+from torchratslam.navigation.params import NavParams, office_config
 from torchratslam.navigation.planner import plan_route
 from torchratslam.navigation.plots import (
     plot_experience_map,
@@ -234,7 +234,7 @@ def _adaptation(ctx: ExperimentContext) -> Report:
     office = build_office(s.plan, seed=ctx.seed)
     _, xy = s.matrices[0]
     robot = MappingRobot(office_config(xy), office=office, seed=ctx.seed)
-    agent = NavigationAgent(robot)
+    agent = NavigationAgent(robot, NavParams(junction_turns=True))
     robot.explore(s.explore_s)
     while True:
         try:
@@ -309,7 +309,12 @@ def _adaptation(ctx: ExperimentContext) -> Report:
         "with, so it counts as a failure of the link it was following, and also of the links "
         "of the experiences overlapping the robot's place facing its way (the planner treats "
         "them as where it is).",
-        "Routes follow links the way they were driven (a chain of executed behaviours).",
+        "Routes follow links the way they were driven (a chain of executed behaviours), and may "
+        "turn at a junction onto another representation of it (within 1 m, facing a crossing "
+        "way; never two turns in a row, never a turn-around), so a blocked corridor is not "
+        "bypassed by turning; arbitration compares the local paths with the route's shape "
+        "from the robot on (each turn closed up), as the map can hold a junction's "
+        "representations metres apart.",
         "Before every trial the robot is steered back to the start the shortest way round the "
         "obstacle (ground truth, as by an operator; mapped, not counted). After the removal it "
         "is steered along the open path both ways, then explores; the paper's robot explored "
