@@ -48,7 +48,7 @@ def _summary_lines(report: dict[str, Any]) -> list[str]:
     return [
         "",
         f"- ICP, the paper's figure (LibICP residual: mean squared nearest-neighbour "
-        f"distance, single-session map fixed, multisession moved): "
+        f"distance, the single-session map moved onto the multisession map): "
         f"{fmt_value(report.get('icp_libicp_mse_m2'))} m^2; the paper reports "
         f"{fmt_value(report.get('paper_icp_mse_m2'))} m^2",
         f"- ICP RMSE (the project's figure, not the paper's) multisession vs single-session "

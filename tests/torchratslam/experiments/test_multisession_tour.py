@@ -2,17 +2,39 @@
 
 from __future__ import annotations
 
+import contextlib
+import io
+
+import pytest
+
 from torchratslam.config import load_config
+from torchratslam.experiments.multisession_report import report_markdown
 from torchratslam.experiments.multisession_tour import run_tour
 from torchratslam.sim import get_tour
 
 
-def test_every_progress_bar_says_which_run_it_is(capsys):
+@pytest.fixture(scope="module")
+def lab_tour_run():
+    """A short lab-tour run with progress bars, and what it wrote to stderr."""
     tour = get_tour("lab_tour")
-    run_tour(load_config("lab_tour"), tour, progress=True, max_frames=8)
-    err = capsys.readouterr().err
+    err = io.StringIO()
+    with contextlib.redirect_stderr(err):
+        out = run_tour(load_config("lab_tour"), tour, progress=True, max_frames=8)
+    return tour, out, err.getvalue()
+
+
+def test_every_progress_bar_says_which_run_it_is(lab_tour_run):
+    tour, _, err = lab_tour_run
     n = len(tour.sessions)
     for label in ("single session", "sessions concatenated", "last session alone"):
         assert label in err, label
     for i, s in enumerate(tour.sessions):
         assert f"session {i + 1}/{n} {s.name}" in err
+
+
+def test_the_report_says_which_map_the_papers_icp_moves(lab_tour_run):
+    """The paper's figure moves the single-session map (LibICP's template) onto the
+    multisession map (its model)."""
+    _, out, _ = lab_tour_run
+    text = report_markdown(out["report"])
+    assert "the single-session map moved onto the multisession map" in text
