@@ -125,7 +125,9 @@ class ExperienceGraph:
         self.behaviour = np.zeros(0, dtype=np.int64)
         self.version = 0
         self._eidx: dict[tuple[int, int], int] = {}
+        self._out: dict[int, list[int]] = {}  # each source's link targets, in creation order
         self._g = nx.DiGraph()
+        self._g_edges: list[tuple[int, int]] = []  # links not yet in the graph, in order
         self._dirty_edges: set[int] = set()  # links whose graph attributes are stale
         self._dirty_nodes: set[int] = set()  # experiences whose graph attributes are stale
         self._poses_dirty = False
@@ -161,6 +163,7 @@ class ExperienceGraph:
         behaviour, confidence``. Treat it as read-only: change the map through the
         methods so the arrays stay in sync.
         """
+        self._sync_structure()
         if self._dirty_nodes:
             nodes = self._g.nodes
             for i in sorted(self._dirty_nodes):
@@ -176,7 +179,18 @@ class ExperienceGraph:
             self._poses_dirty = False
         return self._g
 
+    def _sync_structure(self) -> None:
+        """Add the experiences and links made since the graph was last read (their
+        attributes follow from the dirty sets)."""
+        g = self._g
+        if len(g) < self.n:
+            g.add_nodes_from(range(len(g), self.n))
+        if self._g_edges:
+            g.add_edges_from(self._g_edges)
+            self._g_edges.clear()
+
     def _flush_edges(self) -> None:
+        self._sync_structure()
         for k in sorted(self._dirty_edges):
             attrs = _edge_attrs(self.link, self.counts, self.behaviour, k)
             self._g.edges[int(self.src[k]), int(self.dst[k])].update(attrs)
@@ -216,29 +230,31 @@ class ExperienceGraph:
             The new experience id (= its row).
         """
         pose = (float(x), float(y), wrap_angle(float(th), include_pi=True))
-        pcv = np.asarray(pc, dtype=np.float64).reshape(-1)
-        if pcv.shape != (3,) or not (
-            all(map(math.isfinite, pose)) and all(map(math.isfinite, pcv.tolist()))
-        ):
+        if isinstance(pc, tuple) and len(pc) == 3:
+            pcv = tuple(map(float, pc))
+        else:
+            pcv = tuple(np.asarray(pc, dtype=np.float64).reshape(-1).tolist())
+        if len(pcv) != 3 or not all(map(math.isfinite, (*pose, *pcv))):
             raise InputError(
-                f"experience needs finite x, y, th and 3 pose-cell coordinates, got {pose}, {pcv}"
+                f"experience needs finite x, y, th and 3 pose-cell coordinates, got {pose}, "
+                f"{np.asarray(pcv)}"
             )
         i = self.n
-        need = i + 1
-        self.pose = _grow(self.pose, need)
-        self.pc = _grow(self.pc, need)
-        self.vt = _grow(self.vt, need)
-        self.frame = _grow(self.frame, need)
-        self.t = _grow(self.t, need)
+        if i == len(self.pose):
+            need = i + 1
+            self.pose = _grow(self.pose, need)
+            self.pc = _grow(self.pc, need)
+            self.vt = _grow(self.vt, need)
+            self.frame = _grow(self.frame, need)
+            self.t = _grow(self.t, need)
         self.pose[i] = pose
         self.pc[i] = pcv
         self.vt[i] = int(template_id)
         self.frame[i] = int(frame)
         self.t[i] = float(t)
-        self.n = need
+        self.n = i + 1
         self.version += 1
-        self._g.add_node(i)  # its attributes are written when the graph is read
-        self._dirty_nodes.add(i)
+        self._dirty_nodes.add(i)  # the graph gets the node and its attributes when read
         return i
 
     def set_link(self, k: int, d: float, heading: float, facing: float, dt: float) -> None:
@@ -285,33 +301,32 @@ class ExperienceGraph:
         dst = self.check_id(dst, "link target")
         if src == dst:
             raise GraphError(f"cannot link experience {src} to itself")
-        if self.link_index(src, dst) >= 0:
+        eidx = self._eidx
+        if (src, dst) in eidx or (dst, src) in eidx:
             return False
-        vals = np.array([d, heading, facing, dt], dtype=np.float64)
-        if not np.all(np.isfinite(vals)) or d < 0:
-            raise InputError(
-                f"link needs finite d >= 0, heading, facing and dt, got {vals.tolist()}"
-            )
+        vals = (float(d), float(heading), float(facing), float(dt))
+        if not all(map(math.isfinite, vals)) or vals[0] < 0:
+            raise InputError(f"link needs finite d >= 0, heading, facing and dt, got {list(vals)}")
         k = self.e
-        need = k + 1
         before = self._links_version
-        for name in self.LINK_FIELDS:
-            setattr(self, name, _grow(getattr(self, name), need))
+        if k == len(self.src):
+            for name in self.LINK_FIELDS:
+                setattr(self, name, _grow(getattr(self, name), k + 1))
         self.src[k] = src
         self.dst[k] = dst
         self.set_link(
             k,
-            float(d),
-            wrap_angle(float(heading), include_pi=True),
-            wrap_angle(float(facing), include_pi=True),
-            float(dt),
+            vals[0],
+            wrap_angle(vals[1], include_pi=True),
+            wrap_angle(vals[2], include_pi=True),
+            vals[3],
         )
         self.counts[k] = counts
         self.behaviour[k] = int(behaviour)
-        self.e = need
-        self._eidx[(src, dst)] = k
-        self._g.add_edge(src, dst)  # its attributes are written when the graph is read
-        self._dirty_edges.add(k)
+        self.e = k + 1
+        eidx[(src, dst)] = k
+        self._out.setdefault(src, []).append(dst)
+        self._g_edges.append((src, dst))  # the graph gets it when read
         # keep the cached reference order current when it was current before the link
         cached = self._ref
         if cached is None or cached[0] != before or cached[1].n != k:
@@ -326,13 +341,14 @@ class ExperienceGraph:
         k = self._eidx.get((int(src), int(dst)))
         if k is None:
             raise GraphError(f"there is no link {src} -> {dst} to remove")
-        self._flush_edges()  # rows shift below
+        self._flush_edges()  # rows shift below (and the graph holds every link)
         e = self.e
         for name in self.LINK_FIELDS:
             a = getattr(self, name)
             a[k : e - 1] = a[k + 1 : e]
         self.e = e - 1
         self._g.remove_edge(int(src), int(dst))
+        self._out[int(src)].remove(int(dst))
         self.version += 1
         self._links_version += 1
         s, d = self.src[: self.e].tolist(), self.dst[: self.e].tolist()
@@ -350,7 +366,7 @@ class ExperienceGraph:
         k_pair = self.link_index(src, dst)
         # the links leaving src (a node's few out-links, not the map's links)
         eidx, beh, dsts, counts = self._eidx, self.behaviour, self.dst, self.counts
-        out = [eidx[(src, v)] for v in self._g.successors(src)]
+        out = [eidx[(src, v)] for v in self._out.get(src, ())]
         rows = [k for k in out if beh[k] == behaviour]
         for k in rows:
             counts[k, 2] += 1
@@ -470,6 +486,8 @@ class ExperienceGraph:
         self.meas = np.array([_measurement_of(*v) for v in vals[:, :3].tolist()]).reshape(e, 3)
         self.counts, self.behaviour = arrays["link_counts"], arrays["link_behaviour"]
         self._eidx = eidx
+        for a, b in sorted(eidx, key=eidx.__getitem__):
+            self._out.setdefault(a, []).append(b)
         nodes = (self.pose, self.pc, self.vt, self.frame, self.t)
         self._g.add_nodes_from((i, _node_attrs(*nodes, i)) for i in range(n))
         s, d = ends[:, 0].tolist(), ends[:, 1].tolist()

@@ -129,7 +129,8 @@ class ReferenceOrder:
         return self._bufs[1][:n], self._bufs[2][:n], self._bufs[3][:n]
 
     def insert(self, k: int, src: int, dst: int, link: np.ndarray) -> None:
-        """Insert link ``k`` (the newest) with ends ``src``, ``dst`` and ``link[:3]``.
+        """Insert link ``k`` (the newest) with ends ``src``, ``dst`` and ``link[:3]``
+        (one compiled call: a binary search and the tail moved one row).
 
         Shape:
             link: (>=3,).
@@ -143,10 +144,10 @@ class ReferenceOrder:
                 b[:n] = a[:n]
                 grown.append(b)
             self._bufs = grown
-        at = int(np.searchsorted(self._bufs[1][:n], src, side="right"))
-        for a, value in zip(self._bufs, (k, src, dst, link[:3]), strict=True):
-            a[at + 1 : n + 1] = a[at:n]  # numpy moves overlapping rows correctly
-            a[at] = value
+        from ratslam_graph.backends._sweep import insert_link
+
+        order, srcs, dsts, values = self._bufs
+        insert_link(order, srcs, dsts, values, n, k, src, dst, link)
         self.n = n + 1
 
 

@@ -25,6 +25,7 @@ from ratslam_graph.geometry import (
     inverse,
     odometry_step,
     pc_distance,
+    pc_distance_one,
     ring_distance,
     signed_delta,
     wrap_angle,
@@ -263,3 +264,27 @@ def test_the_torch_side_shares_the_one_implementation():
 
     assert ev.align_se2 is geometry.align_se2 and ev.dead_reckoning is geometry.dead_reckoning
     assert merge.pc_distance is geometry.pc_distance is stage.pc_distance
+
+
+def test_pc_distance_one_gives_pc_distances_bits():
+    rng = np.random.default_rng(3)
+    dims = (21, 21, 36)
+    # cells anywhere on the rings, exactly on cells, half a ring apart, and far outside
+    a = np.concatenate(
+        [
+            rng.uniform(0, 21, (300, 3)),
+            np.floor(rng.uniform(0, 21, (100, 3))),
+            rng.uniform(-80, 80, (100, 3)),
+        ]
+    )
+    b = np.concatenate(
+        [
+            rng.uniform(0, 21, (300, 3)),
+            a[300:400] + np.array([10.5, 0.0, 18.0]),
+            rng.uniform(-80, 80, (100, 3)),
+        ]
+    )
+    for p, q in zip(a, b, strict=True):
+        want = float(pc_distance(p, q, dims))
+        got = pc_distance_one(p.tolist(), q.tolist(), dims)
+        assert got.hex() == want.hex(), (p, q)

@@ -304,3 +304,95 @@ def search_panoramic(  # pragma: no cover - compiled
             if s < best:
                 best = s
     return out_t, out_k, out_s, m, best, pruned
+
+
+@njit(cache=True, nogil=True)
+def _group_sums(
+    t: np.ndarray, m: int, group_of_row: np.ndarray, g: int
+) -> np.ndarray:  # pragma: no cover - compiled
+    """Template ``m``'s group column sums in float64, ``(G, X)``."""
+    ny, nx = t.shape[1], t.shape[2]
+    gs = np.zeros((g, nx))
+    for y in range(ny):
+        gi = group_of_row[y]
+        for c in range(nx):
+            gs[gi, c] += t[m, y, c]
+    return gs
+
+
+@njit(cache=True, nogil=True)
+def summaries_panoramic(  # pragma: no cover - compiled
+    t: np.ndarray,
+    group_of_row: np.ndarray,
+    block_of_col: np.ndarray,
+    g: int,
+    nb: int,
+    gsort: np.ndarray,
+    pool: np.ndarray,
+) -> None:
+    """Panoramic bound summaries of templates ``t`` (sums in float64, stored in the
+    outputs' dtype): each group's column sums sorted (``gsort``) and summed over each
+    block of columns (``pool``), as :func:`~torchratslam.local_view.bounds.template_summaries`.
+
+    Shape:
+        t: (M, Y, X); group_of_row: (Y,); block_of_col: (X,); gsort: (M, G * X);
+        pool: (M, G * B).
+    """
+    nx = t.shape[2]
+    for m in range(t.shape[0]):
+        gs = _group_sums(t, m, group_of_row, g)
+        pl = np.zeros(g * nb)
+        for gi in range(g):
+            gsort[m, gi * nx : (gi + 1) * nx] = np.sort(gs[gi])
+            for c in range(nx):
+                pl[gi * nb + block_of_col[c]] += gs[gi, c]
+        pool[m] = pl
+
+
+@njit(cache=True, nogil=True)
+def summaries_normal(  # pragma: no cover - compiled
+    t: np.ndarray,
+    group_of_row: np.ndarray,
+    block_of_col: np.ndarray,
+    offsets: np.ndarray,
+    g: int,
+    nb: int,
+    pool: np.ndarray,
+    cols: np.ndarray,
+    pairs: np.ndarray,
+) -> None:
+    """Normal-mode bound summaries of templates ``t`` (sums in float64, stored in the
+    outputs' dtype), as :func:`~torchratslam.local_view.bounds.template_summaries`: the
+    group-block sums of every offset's compared window (``pool``, offset-major), the
+    column sums (``cols``) and the sums of adjacent column pairs from even, then from
+    odd columns (``pairs``, zero-padded).
+
+    Shape:
+        t: (M, Y, X); group_of_row: (Y,); block_of_col: (W,) the block of each window
+        column; offsets: (K,); pool: (M, K * G * B); cols: (M, X); pairs: (M, 2 * (X // 2)).
+    """
+    ny, nx = t.shape[1], t.shape[2]
+    width = block_of_col.shape[0]
+    h = nx // 2
+    odd = (nx - 1) // 2
+    for m in range(t.shape[0]):
+        gs = _group_sums(t, m, group_of_row, g)
+        pl = np.zeros(offsets.shape[0] * g * nb)
+        for k in range(offsets.shape[0]):
+            o = offsets[k]
+            for gi in range(g):
+                base = (k * g + gi) * nb
+                for j in range(width):
+                    pl[base + block_of_col[j]] += gs[gi, o + j]
+        pool[m] = pl
+        cs = np.zeros(nx)
+        for y in range(ny):
+            for c in range(nx):
+                cs[c] += t[m, y, c]
+        cols[m] = cs
+        pr = np.zeros(2 * h)
+        for j in range(h):
+            pr[j] = cs[2 * j] + cs[2 * j + 1]
+        for j in range(odd):
+            pr[h + j] = cs[2 * j + 1] + cs[2 * j + 2]
+        pairs[m] = pr

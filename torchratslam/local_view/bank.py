@@ -31,7 +31,8 @@ class TemplateBank(nn.Module):
     Args:
         y_size: template height (rows).
         x_size: template width (columns).
-        summaries: function computing the summaries of a batch ``(K, Y, X)`` of templates.
+        summaries: function computing the summaries of a batch ``(K, Y, X)`` of templates
+            (tensors, or numpy arrays for a bank on the CPU).
         summary_shapes: name -> per-template shape of each summary.
         capacity: initial number of rows.
         dtype: template dtype.
@@ -48,7 +49,7 @@ class TemplateBank(nn.Module):
         y_size: int,
         x_size: int,
         *,
-        summaries: Callable[[torch.Tensor], dict[str, torch.Tensor]] | None = None,
+        summaries: Callable[[torch.Tensor], Mapping[str, torch.Tensor | np.ndarray]] | None = None,
         summary_shapes: Mapping[str, tuple[int, ...]] | None = None,
         capacity: int = 64,
         dtype: torch.dtype = torch.float32,
@@ -62,6 +63,7 @@ class TemplateBank(nn.Module):
         self._summary_shapes = dict(summary_shapes or {})
         self.dtype, self.device = dtype, torch.device(device) if device is not None else None
         self._n = 0
+        self._means_n = 0  # templates whose mean is computed (on demand: see means)
         self._capacity = 0
         self._arrays: dict[str, tuple[torch.Tensor, np.ndarray]] = {}
         self._alloc(max(1, int(capacity)))
@@ -103,8 +105,20 @@ class TemplateBank(nn.Module):
 
     @property
     def means(self) -> torch.Tensor:
-        """Mean of each template, shape ``(N,)``."""
+        """Mean of each template, shape ``(N,)``.
+
+        Computed when read, template by template (``mean`` of each appended template,
+        as at its append): the search never reads them, and a torch call per new
+        template costs more than its search.
+        """
+        self._fill_means()
         return self._means[: self._n]
+
+    def _fill_means(self) -> None:
+        data, means = self._buffer("data"), self._buffer("means")
+        for i in range(self._means_n, self._n):
+            means[i : i + 1] = data[i : i + 1].mean(dim=(1, 2))
+        self._means_n = self._n
 
     @property
     def frames(self) -> torch.Tensor:
@@ -139,6 +153,8 @@ class TemplateBank(nn.Module):
         Shape:
             ``(capacity, *shape)``.
         """
+        if name == "means":
+            self._fill_means()
         buf = self._buffer(name)
         cached = self._arrays.get(name)
         if cached is None or cached[0] is not buf:
@@ -192,11 +208,17 @@ class TemplateBank(nn.Module):
                 cap *= 2
             self._alloc(cap)
         sl = slice(self._n, self._n + k)
-        self._buffer("data")[sl] = t
-        self._buffer("means")[sl] = t.mean(dim=(1, 2))
+        on_cpu = t.device.type == "cpu"
+        if on_cpu:  # numpy views of the buffers: a torch call costs more than the copy
+            self.array("data")[sl] = t.detach().numpy()
+        else:
+            self._buffer("data")[sl] = t
         if self._summarise is not None:
             for name, value in self._summarise(t).items():
-                self._buffer(name)[sl] = value
+                if isinstance(value, np.ndarray):
+                    self.array(name)[sl] = value
+                else:
+                    self._buffer(name)[sl] = value
         if frames is None:
             frames = -1
         if not isinstance(frames, int):

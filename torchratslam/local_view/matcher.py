@@ -27,6 +27,7 @@ work that cannot change the answer (the strategies: :mod:`~torchratslam.local_vi
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 
 import numpy as np
 import torch
@@ -154,12 +155,20 @@ class TemplateMatcher:
             self._mat_cache[key] = self._mats[name].to(dtype)
         return self._mat_cache[key]
 
-    def summarise(self, t: torch.Tensor) -> dict[str, torch.Tensor]:
+    def summarise(self, t: torch.Tensor) -> Mapping[str, torch.Tensor | np.ndarray]:
         """Per-template summaries for the bounds (:func:`~.bounds.template_summaries`).
+
+        On the CPU one compiled call computes them (numpy arrays, sums in float64:
+        :func:`~torchratslam.local_view._sad.summaries_panoramic` and
+        :func:`~torchratslam.local_view._sad.summaries_normal`; a few torch calls per new
+        template cost more than the search); elsewhere torch does (tensors). The two
+        differ in rounding only, which the search's margin covers.
 
         Shape:
             t: ``(M, Y, X)``.
         """
+        if t.device.type == "cpu":
+            return self._summarise_compiled(np.ascontiguousarray(t.detach().numpy()))
         return bounds.template_summaries(
             t,
             self._mat("groups", t.dtype),
@@ -167,6 +176,22 @@ class TemplateMatcher:
             self._mat("shifted", t.dtype),
             panoramic=self.panoramic,
         )
+
+    def _summarise_compiled(self, a: np.ndarray) -> dict[str, torch.Tensor | np.ndarray]:
+        from torchratslam.local_view._sad import summaries_normal, summaries_panoramic
+
+        m, g, nb, x = a.shape[0], self.groups, self.blocks, self.x_size
+        rows, cols = self.group_of_row, self.block_of_col
+        if self.panoramic:
+            gsort = np.empty((m, g * x), a.dtype)
+            pool = np.empty((m, g * nb), a.dtype)
+            summaries_panoramic(a, rows, cols, g, nb, gsort, pool)
+            return {"gsort": gsort, "pool": pool}
+        pool = np.empty((m, self.n_offsets * g * nb), a.dtype)
+        sums = np.empty((m, x), a.dtype)
+        pairs = np.empty((m, 2 * self.half), a.dtype)
+        summaries_normal(a, rows, cols, self.offsets_np, g, nb, pool, sums, pairs)
+        return {"pool": pool, "cols": sums, "pairs": pairs}
 
     def view_parts(self, view: torch.Tensor) -> dict[str, torch.Tensor]:
         """Per-frame view summaries used by the bounds and the exact kernel

@@ -10,11 +10,19 @@ import numpy as np
 
 __all__ = ["History"]
 
+# the columns of a row
+_FRAME, _T, _EXP, _GT_OK, _GT, _ODO, _PC = 0, 1, 2, 3, 4, 7, 10
+_COLUMNS = 13
+_NO_POSE = (np.nan, np.nan, np.nan)
+
 
 class History:
     """One row per processed frame: frame index, time, current experience, ground-truth
     pose (None when the frame had none), odometry ``(vtrans, vrot, dt)`` and pose-cell
     packet centre ``(x, y, th)`` in cells.
+
+    The rows live in one float64 array grown by doubling (13 numbers a frame, no Python
+    object per frame); frame indices and experience ids are exact in float64.
 
     Example:
         >>> h = History()
@@ -25,15 +33,11 @@ class History:
     """
 
     def __init__(self) -> None:
-        self._frames: list[int] = []
-        self._t: list[float] = []
-        self._exp: list[int] = []
-        self._gt: list[tuple[float, ...] | None] = []
-        self._odo: list[tuple[float, float, float]] = []
-        self._pc: list[tuple[float, float, float]] = []
+        self._rows = np.zeros((0, _COLUMNS))
+        self._n = 0
 
     def __len__(self) -> int:
-        return len(self._frames)
+        return self._n
 
     def append(
         self,
@@ -45,22 +49,38 @@ class History:
         pc: tuple[float, float, float],
     ) -> None:
         """Record one frame (``pose``: its ground truth ``(x, y, th)`` or None)."""
-        self._frames.append(frame)
-        self._t.append(float(t))
-        self._exp.append(experience_id)
-        self._gt.append(None if pose is None else tuple(float(v) for v in pose))
-        self._odo.append(odometry)
-        self._pc.append(pc)
+        i = self._n
+        if i == len(self._rows):
+            grown = np.zeros((max(64, 2 * i), _COLUMNS))
+            grown[:i] = self._rows[:i]
+            self._rows = grown
+        gx, gy, gth = _NO_POSE if pose is None else pose
+        self._rows[i] = (
+            frame,
+            t,
+            experience_id,
+            pose is not None,
+            gx,
+            gy,
+            gth,
+            *odometry,
+            *pc,
+        )
+        self._n = i + 1
 
     def clear(self) -> None:
         """Forget every frame."""
-        for rows in (self._frames, self._t, self._exp, self._gt, self._odo, self._pc):
-            rows.clear()
+        self._n = 0
+
+    def _col(self, a: int, b: int | None = None) -> np.ndarray:
+        """Columns ``a`` (or ``a:b``) of the rows in use, copied."""
+        rows = self._rows[: self._n]
+        return (rows[:, a] if b is None else rows[:, a:b]).copy()
 
     # ------------------------------------------------------------------ outputs
     def times(self) -> np.ndarray:
         """The frames' time stamps (s). Shape: ``(F,)`` float64."""
-        return np.asarray(self._t)
+        return self._col(_T)
 
     def trajectory(self, poses: np.ndarray) -> np.ndarray:
         """Per frame: ``[frame, t, experience_id, x, y, th]`` with the experience's pose
@@ -70,24 +90,22 @@ class History:
             poses: ``(N, 3)``, row = experience id; returns ``(F, 6)`` float64.
         """
         poses = np.asarray(poses, dtype=np.float64).reshape(-1, 3)
-        exp = np.asarray(self._exp, dtype=np.int64)
+        exp = self._col(_EXP).astype(np.int64)
         out = np.full((exp.shape[0], 6), np.nan)
-        out[:, 0] = self._frames
-        out[:, 1] = self._t
-        out[:, 2] = exp
+        out[:, :3] = self._col(_FRAME, _EXP + 1)
         ok = (exp >= 0) & (exp < poses.shape[0])
         out[ok, 3:] = poses[exp[ok]]
         return out
 
     def groundtruth_poses(self) -> np.ndarray | None:
         """The frames' ground-truth poses ``(F, 3)``, or None if any frame had none."""
-        if not self._gt or any(p is None for p in self._gt):
+        if self._n == 0 or not self._rows[: self._n, _GT_OK].all():
             return None
-        return np.asarray(self._gt, dtype=np.float64)
+        return self._col(_GT, _GT + 3)
 
     def odometry_log(self) -> np.ndarray:
         """The ``(vtrans, vrot, dt)`` used for each frame. Shape: ``(F, 3)``."""
-        return np.asarray(self._odo, dtype=np.float64).reshape(-1, 3)
+        return self._col(_ODO, _ODO + 3)
 
     def pc_log(self) -> np.ndarray:
         """The pose-cell packet centre ``(x, y, th)`` in cells after each frame.
@@ -95,7 +113,7 @@ class History:
         Shape:
             returns ``(F, 3)``.
         """
-        return np.asarray(self._pc, dtype=np.float64).reshape(-1, 3)
+        return self._col(_PC, _PC + 3)
 
     def ate(self, poses: np.ndarray, groundtruth: np.ndarray | None = None) -> float | None:
         """ATE (m) of :meth:`trajectory` (``poses``: the experiences') after SE(2)
@@ -138,28 +156,24 @@ class History:
                 ids beyond its length are kept). Shape: ``(M,)``.
         """
         ids = np.asarray(old_to_new, dtype=np.int64).reshape(-1)
-        old = np.asarray(self._exp, dtype=np.int64)
+        old = self._col(_EXP).astype(np.int64)
         ok = (old >= 0) & (old < ids.size)
         if not ok.any():  # nothing to re-point (e.g. no experience yet: frame 0 only)
             return
-        new = np.where(ok, ids[np.where(ok, old, 0)], old)
-        self._exp[:] = [int(v) for v in new]
+        self._rows[: self._n, _EXP] = np.where(ok, ids[np.where(ok, old, 0)], old)
 
     def arrays(self) -> dict[str, np.ndarray]:
         """The records as arrays, for saving: ``frames`` ``(F,)`` int64, ``t`` ``(F,)``,
         ``exp`` ``(F,)`` int64, ``gt`` ``(F, 3)`` (NaN rows where ``gt_ok`` ``(F,)`` is
         False), ``odo`` ``(F, 3)``, ``pc`` ``(F, 3)``."""
-        gt = np.asarray(
-            [(np.nan, np.nan, np.nan) if p is None else p for p in self._gt], np.float64
-        ).reshape(-1, 3)
         return {
-            "frames": np.asarray(self._frames, np.int64),
-            "t": np.asarray(self._t, np.float64),
-            "exp": np.asarray(self._exp, np.int64),
-            "gt": gt,
-            "gt_ok": np.asarray([p is not None for p in self._gt], bool),
-            "odo": np.asarray(self._odo, np.float64).reshape(-1, 3),
-            "pc": np.asarray(self._pc, np.float64).reshape(-1, 3),
+            "frames": self._col(_FRAME).astype(np.int64),
+            "t": self._col(_T),
+            "exp": self._col(_EXP).astype(np.int64),
+            "gt": self._col(_GT, _GT + 3),
+            "gt_ok": self._col(_GT_OK).astype(bool),
+            "odo": self._col(_ODO, _ODO + 3),
+            "pc": self._col(_PC, _PC + 3),
         }
 
     def restore(self, arrays: Mapping[str, np.ndarray]) -> None:
@@ -173,17 +187,12 @@ class History:
         n = a["frames"].shape[0]
         if any(v.shape[0] != n for v in a.values()):
             raise ValueError("arrays of different lengths")
-        self._frames[:] = [int(v) for v in a["frames"]]
-        self._t[:] = [float(v) for v in a["t"]]
-        self._exp[:] = [int(v) for v in a["exp"]]
-        self._gt[:] = [
-            tuple(float(x) for x in g) if ok else None
-            for g, ok in zip(a["gt"], a["gt_ok"], strict=True)
-        ]
-        self._odo[:] = [_triple(o) for o in a["odo"]]
-        self._pc[:] = [_triple(c) for c in a["pc"]]
-
-
-def _triple(row: np.ndarray) -> tuple[float, float, float]:
-    x, y, z = (float(v) for v in row)
-    return x, y, z
+        rows = np.zeros((max(64, n), _COLUMNS))
+        rows[:n, _FRAME] = a["frames"]
+        rows[:n, _T] = a["t"]
+        rows[:n, _EXP] = a["exp"]
+        rows[:n, _GT_OK] = a["gt_ok"]
+        rows[:n, _GT : _GT + 3] = np.where(a["gt_ok"][:, None], a["gt"], np.nan)
+        rows[:n, _ODO : _ODO + 3] = a["odo"]
+        rows[:n, _PC : _PC + 3] = a["pc"]
+        self._rows, self._n = rows, n

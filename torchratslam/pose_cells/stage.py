@@ -19,7 +19,7 @@ from typing import Any, cast
 import numpy as np
 import torch
 
-from ratslam_graph.geometry import pc_distance
+from ratslam_graph.geometry import pc_distance, pc_distance_one
 from ratslam_graph.messages import Action, ActionKind
 from torchratslam.config import PoseCellParams
 from torchratslam.errors import InputError, MapFormatError
@@ -30,6 +30,15 @@ __all__ = ["RECENT_TEMPLATES", "PoseCells"]
 
 RECENT_TEMPLATES = 10
 """Templates among the last this many learnt do not inject energy."""
+
+
+def _with_room(a: np.ndarray, n: int) -> np.ndarray:
+    """``a`` (its first ``n`` rows in use) with room for one more row (doubling)."""
+    if n < len(a):
+        return a
+    out = np.zeros((max(16, 2 * n), *a.shape[1:]), dtype=a.dtype)
+    out[:n] = a[:n]
+    return out
 
 
 class PoseCells:
@@ -65,10 +74,9 @@ class PoseCells:
         self._clear()
 
     def _clear(self) -> None:
-        self.template_pc = np.zeros((0, 3), dtype=np.float64)
-        self.template_decay = np.zeros(0, dtype=np.float64)
-        self.exp_pc = np.zeros((0, 3), dtype=np.float64)
-        self.exp_template = np.zeros(0, dtype=np.int64)
+        # rows [:n] of buffers with spare room (no copy of every row per new one)
+        self._set_templates(np.zeros((0, 3)), np.zeros(0))
+        self._set_experiences(np.zeros((0, 3)), np.zeros(0, dtype=np.int64))
         self._template_exps: dict[int, list[int]] = {}
         self.current_exp = -1
         self.current_vt = -1
@@ -84,7 +92,43 @@ class PoseCells:
         self.network.reset()
         self._clear()
 
+    def _set_templates(self, pc: np.ndarray, decay: np.ndarray) -> None:
+        self._n_t = len(pc)
+        self._t_pc, self._t_decay = pc.astype(np.float64), decay.astype(np.float64)
+
+    def _set_experiences(self, pc: np.ndarray, template: np.ndarray) -> None:
+        self._n_e = len(pc)
+        self._e_pc, self._e_template = pc.astype(np.float64), template.astype(np.int64)
+
     # ------------------------------------------------------------ accessors
+    @property
+    def template_pc(self) -> np.ndarray:
+        """The cell ``(x, y, th)`` where each template was learnt.
+
+        Shape:
+            (N, 3).
+        """
+        return self._t_pc[: self._n_t]
+
+    @property
+    def template_decay(self) -> np.ndarray:
+        """Each template's decay. Shape: (N,)."""
+        return self._t_decay[: self._n_t]
+
+    @property
+    def exp_pc(self) -> np.ndarray:
+        """The cell ``(x, y, th)`` where each experience was learnt.
+
+        Shape:
+            (M, 3).
+        """
+        return self._e_pc[: self._n_e]
+
+    @property
+    def exp_template(self) -> np.ndarray:
+        """The template of each experience. Shape: (M,)."""
+        return self._e_template[: self._n_e]
+
     @property
     def centre(self) -> tuple[float, float, float]:
         """Packet centre ``(x, y, th)`` in cells, as decoded at the last odometry step."""
@@ -97,11 +141,11 @@ class PoseCells:
 
     @property
     def n_templates(self) -> int:
-        return int(self.template_pc.shape[0])
+        return self._n_t
 
     @property
     def n_experiences(self) -> int:
-        return int(self.exp_pc.shape[0])
+        return self._n_e
 
     def template_experiences(self, template_id: int) -> list[int]:
         """Experience ids learnt with ``template_id``, in creation order."""
@@ -133,25 +177,30 @@ class PoseCells:
             )
         self.relative_rad = rad
         if vt == n:
-            self.template_pc = np.concatenate([self.template_pc, np.asarray([self._best])], axis=0)
-            self.template_decay = np.append(self.template_decay, p.vt_active_decay)
+            self._t_pc = _with_room(self._t_pc, n)
+            self._t_decay = _with_room(self._t_decay, n)
+            self._t_pc[n] = self._best
+            self._t_decay[n] = p.vt_active_decay
+            self._n_t = n + 1
         elif vt < n - RECENT_TEMPLATES or (
             p.vt_inject_rule == "openratslam" and n < RECENT_TEMPLATES
         ):  # OpenRatSLAM's unsigned "size - 10" wraps while fewer than 10 exist
             if vt == self.current_vt:
-                self.template_decay[vt] += p.vt_active_decay
-            energy = p.pc_vt_inject_energy / 30.0 * (30.0 - math.exp(1.2 * self.template_decay[vt]))
+                self._t_decay[vt] += p.vt_active_decay
+            energy = p.pc_vt_inject_energy / 30.0 * (30.0 - math.exp(1.2 * self._t_decay[vt]))
             if energy > 0:
                 n_th = self.dims[2]
                 self.vt_delta_pc_th = rad / (2.0 * math.pi) * n_th
-                pc_x, pc_y, pc_th = self.template_pc[vt]
+                pc_x, pc_y, pc_th = self._t_pc[vt]
                 th = pc_th + self.vt_delta_pc_th
                 if th < 0:
                     th += n_th
                 if th >= n_th:
                     th -= n_th
                 self.network.inject(int(pc_x), int(pc_y), int(th) % n_th, energy)
-        self.template_decay = np.maximum(self.template_decay - p.pc_vt_restore, p.vt_active_decay)
+        decay = self.template_decay  # in place: the same elementwise arithmetic
+        np.subtract(decay, p.pc_vt_restore, out=decay)
+        np.maximum(decay, p.vt_active_decay, out=decay)
         self.prev_vt = self.current_vt
         self.current_vt = vt
         self._vt_update = True
@@ -172,9 +221,9 @@ class PoseCells:
         return self._decide()
 
     # --------------------------------------------------------------- action
-    def _delta_pc(self, cells: np.ndarray) -> np.ndarray:
-        """Distance of experience cells ``(..., 3)`` from the centre, whose theta is
-        corrected by ``-vt_delta_pc_th`` (OpenRatSLAM's ``get_delta_pc``)."""
+    def _corrected_centre(self) -> tuple[float, float, float]:
+        """The centre with theta corrected by ``-vt_delta_pc_th`` (OpenRatSLAM's
+        ``get_delta_pc``)."""
         n_th = self.dims[2]
         x, y, th = self._best
         th = th - self.vt_delta_pc_th
@@ -182,13 +231,20 @@ class PoseCells:
             th += n_th
         if th >= n_th:
             th -= n_th
-        return pc_distance(cells, np.array([x, y, th]), self.dims)
+        return x, y, th
+
+    def _delta_pc(self, cells: np.ndarray) -> np.ndarray:
+        """Distance of experience cells ``(..., 3)`` from the corrected centre."""
+        return pc_distance(cells, np.array(self._corrected_centre()), self.dims)
 
     def _create(self) -> Action:
         src = self.current_exp
         new = self.n_experiences
-        self.exp_pc = np.concatenate([self.exp_pc, np.asarray([self._best])], axis=0)
-        self.exp_template = np.append(self.exp_template, self.current_vt)
+        self._e_pc = _with_room(self._e_pc, new)
+        self._e_template = _with_room(self._e_template, new)
+        self._e_pc[new] = self._best
+        self._e_template[new] = self.current_vt
+        self._n_e = new + 1
         self._template_exps.setdefault(self.current_vt, []).append(new)
         self.current_exp = new
         return Action(ActionKind.CREATE, dest_id=new, src_id=src, relative_rad=self.relative_rad)
@@ -205,7 +261,9 @@ class PoseCells:
         if not exps:
             return self._create()
         threshold = self.params.exp_delta_pc_threshold
-        d_current = float(self._delta_pc(self.exp_pc[self.current_exp]))
+        d_current = pc_distance_one(
+            self._e_pc[self.current_exp].tolist(), self._corrected_centre(), self.dims
+        )
         if d_current > threshold or self.current_vt != self.prev_vt:
             ids = np.asarray(exps, dtype=np.int64)
             ids = ids[ids != self.current_exp]
@@ -297,8 +355,8 @@ class PoseCells:
         self.reset()
         if activity.size:
             self.network.set_activity(activity)
-        self.template_pc, self.template_decay = tpc.copy(), decay.copy()
-        self.exp_pc, self.exp_template = epc.copy(), etpl.copy()
+        self._set_templates(tpc, decay)
+        self._set_experiences(epc, etpl)
         self._template_exps = {}
         for i, t in enumerate(etpl.tolist()):  # restore only, not a hot path
             self._template_exps.setdefault(int(t), []).append(i)

@@ -142,3 +142,45 @@ def sweep_window(
         if k == e:
             k = 0
     return k, changed
+
+
+@njit(cache=True, nogil=True)
+def insert_link(
+    order: np.ndarray,
+    src: np.ndarray,
+    dst: np.ndarray,
+    link: np.ndarray,
+    n: int,
+    k: int,
+    s: int,
+    t: int,
+    values: np.ndarray,
+) -> None:  # pragma: no cover - compiled
+    """Insert link ``k`` (``s -> t``, ``values[:3]`` = ``(d, heading, facing)``) into the
+    first ``n`` rows of buffers sorted by source (creation order within a source): after
+    every row whose source is ``<= s``, the rows behind it moved down one.
+
+    Shape:
+        order, src, dst: (C,) with C > n; link: (C, 3); values: (>=3,).
+    """
+    lo = 0
+    hi = n
+    while lo < hi:  # the first row whose source is > s
+        mid = (lo + hi) // 2
+        if src[mid] <= s:
+            lo = mid + 1
+        else:
+            hi = mid
+    for i in range(n, lo, -1):
+        order[i] = order[i - 1]
+        src[i] = src[i - 1]
+        dst[i] = dst[i - 1]
+        link[i, 0] = link[i - 1, 0]
+        link[i, 1] = link[i - 1, 1]
+        link[i, 2] = link[i - 1, 2]
+    order[lo] = k
+    src[lo] = s
+    dst[lo] = t
+    link[lo, 0] = values[0]
+    link[lo, 1] = values[1]
+    link[lo, 2] = values[2]

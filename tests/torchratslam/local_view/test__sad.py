@@ -120,3 +120,45 @@ def test_panoramic_search_on_equal_templates_keeps_every_tie():
     assert sorted(zip(pt[:k].tolist(), pk[:k].tolist())) == [
         (t, o) for t in range(5) for o in range(6)
     ]
+
+
+@pytest.mark.parametrize("panoramic", [True, False])
+def test_compiled_summaries_are_torchs_up_to_rounding_and_a_loops_sums(panoramic):
+    from torchratslam.local_view import bounds
+
+    rng = np.random.default_rng(11)
+    y, x, shift = 9, 22, 3
+    bank, _ = _bank_and_views(rng, 7, y, x)
+    m = TemplateMatcher(y, x, panoramic=panoramic, shift=shift, step=1)
+    t = torch.from_numpy(bank)
+    got = m.summarise(t)  # CPU: the compiled summaries
+    want = bounds.template_summaries(
+        t.double(),
+        m._mats["groups"],
+        m._mats["blocks"],
+        m._mats["shifted"],
+        panoramic=panoramic,
+    )
+    assert set(got) == set(want)
+    for name, value in got.items():
+        assert isinstance(value, np.ndarray) and value.dtype == np.float32
+        np.testing.assert_allclose(value, want[name].numpy(), rtol=1e-6, atol=1e-6)
+    # a loop over rows and columns: the group sums, their sorted profile, the blocks
+    g, nb, b64 = m.groups, m.blocks, bank.astype(np.float64)
+    gs = np.zeros((len(bank), g, x))
+    for t_i in range(len(bank)):
+        for r in range(y):
+            gs[t_i, m.group_of_row[r]] += b64[t_i, r]
+    if panoramic:
+        np.testing.assert_array_equal(
+            got["gsort"], np.sort(gs, -1).reshape(len(bank), -1).astype(np.float32)
+        )
+        pool = np.zeros((len(bank), g, nb))
+        for c in range(x):
+            pool[:, :, m.block_of_col[c]] += gs[:, :, c]
+        np.testing.assert_allclose(got["pool"], pool.reshape(len(bank), -1), rtol=1e-6)
+    else:
+        np.testing.assert_allclose(got["cols"], b64.sum(1), rtol=1e-6)
+        pairs = [b64.sum(1)[:, c] + b64.sum(1)[:, c + 1] for c in range(0, x - 1, 2)]
+        pairs += [b64.sum(1)[:, c] + b64.sum(1)[:, c + 1] for c in range(1, x - 1, 2)]
+        np.testing.assert_allclose(got["pairs"][:, : len(pairs)], np.stack(pairs, 1), rtol=1e-6)
