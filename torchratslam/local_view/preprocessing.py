@@ -112,8 +112,8 @@ def block_means_uint8(
     """:func:`preprocess`'s crop, grey and block averaging of a uint8 image, in numpy.
 
     The pixel sums are integers (exact in any order), then one division: the float64
-    block means :func:`preprocess` computes in torch, bit for bit, without torch's
-    per-call cost.
+    block means :func:`preprocess` computes in torch, bit for bit, in one compiled call
+    (:func:`torchratslam.local_view._blocks.block_means`).
 
     Args:
         img: the uint8 image.
@@ -124,11 +124,11 @@ def block_means_uint8(
     Shape:
         img: ``(H, W)`` or ``(H, W, C)`` -> ``(ty, tx)`` float64.
     """
-    crop = img[y0 : y0 + ty * by, x0 : x0 + tx * bx]
-    channels = crop.shape[2] if crop.ndim == 3 else 1
-    rows = crop.reshape(ty, by, -1).sum(axis=1, dtype=np.int64)  # (ty, tx * bx * C)
-    sums = rows.reshape(ty, tx, -1).sum(axis=2)
-    return sums / (255.0 * channels * by * bx)
+    from torchratslam.local_view._blocks import block_means
+
+    channels = img.shape[2] if img.ndim == 3 else 1
+    pixels = img.reshape(img.shape[0], img.shape[1], channels)
+    return block_means(pixels, y0, x0, ty, by, tx, bx, 255.0 * channels * by * bx)
 
 
 def preprocess(

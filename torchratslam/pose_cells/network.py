@@ -194,11 +194,18 @@ class PoseCellNetwork(nn.Module):
         )
 
     def _store_centre(self, centre: tuple[float, float, float]) -> None:
-        """Write one network's centre into :attr:`best` (no tensor round trip on CPU)."""
-        if self.best.device.type == "cpu":
-            self.best.numpy()[0] = centre
+        """Write one network's centre into :attr:`best` (on the CPU through a numpy view
+        of the buffer, made again when the buffer is replaced)."""
+        best = self._buffers["best"]
+        assert best is not None
+        view = self.__dict__.get("_best_view")
+        if view is None or view[0] is not best:
+            view = (best, best.numpy() if best.device.type == "cpu" else None)
+            self.__dict__["_best_view"] = view
+        if view[1] is not None:
+            view[1][0] = centre
         else:
-            self.best.copy_(torch.tensor([centre], dtype=torch.float64))
+            best.copy_(torch.tensor([centre], dtype=torch.float64))
 
     def _invalidate(self) -> None:
         """The activity was replaced: the engines forget what they derived from it."""
@@ -364,14 +371,16 @@ class PoseCellNetwork(nn.Module):
         Returns:
             The packet centre ``(x, y, th)`` in cells.
         """
-        if not (self._numpy and self.activity.device.type == "cpu" and self.batch_size == 1):
+        activity = self._buffers["activity"]
+        assert activity is not None
+        if not (self._numpy and activity.device.type == "cpu" and self.batch_size == 1):
             c = self.step(float(vtrans), float(vrot), float(dt))[0].tolist()
             return (c[0], c[1], c[2])
         if not (math.isfinite(vtrans) and math.isfinite(vrot) and math.isfinite(dt)):
             raise InputError(f"odometry must be finite, got vtrans={vtrans}, vrot={vrot}, dt={dt}")
         trans = vtrans * dt / self.params.pc_cell_x_size  # the same arithmetic as step()
         rot = vrot * dt / (2.0 * math.pi / self.dims[2])
-        centre = self._np_engine.step(self.activity, trans, rot)
+        centre = self._np_engine.step(activity, trans, rot)
         self._store_centre(centre)
         return centre
 
