@@ -51,10 +51,11 @@ RECOMMENDED_SESSION_OPTIONS: dict[str, Any] = {
 }
 """The :class:`MultiSessionRatSLAM` options recommended with
 :data:`RECOMMENDED_MERGE_OPTIONS`: a match confirmed by the next new template, the maps
-joined at the frame whose view matches the stored template best, the earlier matching
-templates that the merge puts beside their stored matches identified with them. Chosen
-on the virtual tour's seeds 0-19 and 1000-1009: within one experience of the continuous
-run on 27 of 30, no merge more than 1 m off (docs/multisession.md, "Across seeds")."""
+joined at the frame whose view matches the stored template best (the frames passed
+since the streak's first match included), the earlier matching templates identified
+with their stored matches (their links measured anew). On the virtual tour's seeds
+0-19 and 1000-1009: within one experience of the continuous run on 26 of 30, no merge
+more than 1 m off (docs/multisession.md, "Across seeds")."""
 
 
 def _gt_at(gt: np.ndarray, t: float) -> np.ndarray:

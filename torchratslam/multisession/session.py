@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import dataclasses
 import logging
+import math
 import time
 from collections.abc import Callable, Iterable
 from typing import Any
@@ -31,6 +32,7 @@ from typing import Any
 import numpy as np
 import torch
 
+from ratslam_graph.geometry import wrap_angle
 from ratslam_graph.protocols import ExperienceMapModule
 from torchratslam.config import RatSLAMConfig
 from torchratslam.errors import ConfigError
@@ -59,6 +61,9 @@ is compared with the stored template ``u``; while the error falls the merge wait
 when it rises (or after :data:`MAX_ANCHOR_FRAMES`, or when the partial map makes an
 experience) the maps are joined at the frame of the smallest error, whose view becomes
 the partial map's matching template (:func:`~torchratslam.maps.merge.append_place`).
+With ``merge_persist`` > 1 the frames passed since the first match of the streak are
+compared too (the best view can lie between the first matching template and the
+confirming one); a passed place is linked from the experience current then.
 Templates are learnt a few frames apart, so the template that matched can lie up to half
 a template spacing from ``u``'s place; the view's best match lies within a frame."""
 MAX_ANCHOR_FRAMES = 30
@@ -97,8 +102,9 @@ class MultiSessionRatSLAM:
             (:func:`~torchratslam.maps.merge.fuse_templates`). Without it a delayed
             merge keeps one copy of each such place. Default False; a deviation (the
             paper merges at the first match, so there is nothing to absorb). With
-            ``merge_anchor="view"`` only pairs the merge puts within half the stored
-            map's median link length of each other (the matched template included).
+            ``merge_anchor="view"`` the matched template is absorbed too, and the
+            re-pointed links are measured anew from the merged map's poses (the
+            odometry between the experiences they join).
         merge_anchor: where a merge joins the maps, see :data:`MERGE_ANCHORS`
             (default ``"template"``, the paper); ``"view"`` waits while the view keeps
             matching the stored template better (at most :data:`MAX_ANCHOR_FRAMES`).
@@ -159,6 +165,8 @@ class MultiSessionRatSLAM:
         self.merge_threshold = None if merge_threshold is None else float(merge_threshold)
         self.merge_persist = int(merge_persist)
         self._streak = (-1, 0)  # (stored map, consecutive new templates matching it)
+        # merge_anchor="view": the frames passed since the streak's first match (_place)
+        self._trail: list[dict[str, Any]] = []
         self.merge_absorb = bool(merge_absorb)
         # (partial template, stored map, stored template): the consecutive new templates
         # that matched a stored map under vt_match_threshold without merging yet
@@ -304,6 +312,9 @@ class MultiSessionRatSLAM:
     def _after_step(self, result: StepResult) -> StepResult:
         if self._anchor is not None:
             return self._follow(result)
+        if self._trail and self._streak[1] > 0:  # a match waits for its confirmation
+            self._trail.append(_place(self.slam, self._image, result.frame, math.inf, 0))
+            del self._trail[:-MAX_ANCHOR_FRAMES]
         if not self.pending or not result.view.is_new:
             return result
         template = self.slam.local_view.templates[int(result.view.template_id)]
@@ -314,18 +325,25 @@ class MultiSessionRatSLAM:
             self._seen = []
         if k < 0 or err > threshold:
             self._streak = (-1, 0)
+            self._trail = []
             if k >= 0 and err <= paper:
                 self._seen.append((int(result.view.template_id), k, tid))
             return result
         streak = self._streak[1] + 1 if self._streak[0] == k else 1
         self._streak = (k, streak)
+        if streak == 1 or self.merge_anchor != "view":
+            self._trail = []
         if streak < self.merge_persist:
             self._seen.append((int(result.view.template_id), k, tid))
+            if self.merge_anchor == "view" and not self._trail:
+                self._trail = [_place(self.slam, self._image, result.frame, math.inf, 0)]
             return result
         self._streak = (-1, 0)
         absorb = [(p, t) for p, kk, t in self._seen if kk == k] if self.merge_absorb else []
         self._seen = []
         if self.merge_anchor == "view":
+            best = _place(self.slam, self._image, result.frame, err, offset)
+            trail, self._trail = self._trail[:-1], []  # the last one is this frame
             self._anchor = {
                 "k": k,
                 "u": tid,
@@ -334,7 +352,7 @@ class MultiSessionRatSLAM:
                 else [],
                 "frames": 0,
                 "n_exp": self.slam.counts()[1],
-                "best": _place(self.slam, self._image, result.frame, err, offset),
+                "best": _best_passed(self._banks[k], tid, trail, best),
             }
             return result
         self.merge_with(k, tid, offset=offset, error=err, frame=result.frame, absorb=absorb)
@@ -417,7 +435,7 @@ class MultiSessionRatSLAM:
             tmap = res.info["template_ids"]
             pairs = [(int(tmap[p]), int(t)) for p, t in absorb if 0 <= p < tmap.size]
             if place is not None:
-                pairs = _near_pairs(state, pairs, loaded)
+                state = _remeasured(state, pairs)
             state, fmap, absorbed = fuse_templates(state, pairs)
             exp_ids = fmap[np.asarray(exp_ids, np.int64)]
         apply_state(state, self.slam, exp_ids=exp_ids)
@@ -470,24 +488,59 @@ class MultiSessionRatSLAM:
         return [self.stored[k] for k in self.pending]
 
 
-def _near_pairs(
-    state: MapState, pairs: list[tuple[int, int]], loaded: MapState
-) -> list[tuple[int, int]]:
-    """The ``(template, stored template)`` pairs whose first experiences the merge put
-    within half the stored map's median link length of each other."""
-    if loaded.n_links == 0:
-        return []
-    radius = 0.5 * float(np.median(loaded.link_d))
-    out = []
-    for p, t in pairs:
-        a, b = first_experience(state, p), first_experience(state, t)
-        if (
-            a >= 0
-            and b >= 0
-            and np.hypot(*(state.exp_pose[a, :2] - state.exp_pose[b, :2])) <= radius
-        ):
-            out.append((p, t))
-    return out
+def _best_passed(
+    bank: Any, u: int, trail: list[dict[str, Any]], best: dict[str, Any]
+) -> dict[str, Any]:
+    """The place matching stored template ``u`` (of ``bank``, a stored map's local view)
+    best among ``best`` (the confirming frame) and the frames passed since the first
+    match of the streak (``merge_anchor="view"`` with ``merge_persist`` > 1).
+
+    The first of the ``merge_persist`` matching templates can lie before ``u``'s place
+    and the confirming one after it: the view that matches ``u`` best is then among the
+    frames between them, which the robot has already passed.
+    """
+    for place in trail:
+        errs = bank.errors(torch.as_tensor(place["view"]), [u])[0]
+        j = int(torch.argmin(errs))
+        if float(errs[j]) < best["error"]:
+            best = {**place, "error": float(errs[j]), "offset": int(bank.offsets[j])}
+    return best
+
+
+def _remeasured(state: MapState, pairs: list[tuple[int, int]]) -> MapState:
+    """The merged map with every link that :func:`~torchratslam.maps.merge.fuse_templates`
+    will re-point from a ``drop`` template's experience at its ``keep``'s first
+    experience measured anew between the experiences it will join, from their poses in
+    the merged map (``merge_anchor="view"``).
+
+    The merge puts the partial map where the view matched best, so the pose of a partial
+    experience relative to the stored one it is identified with is the odometry between
+    them; a re-pointed link keeps that geometry instead of the dropped experience's
+    (up to a template spacing away).
+    """
+    n_t = state.n_templates
+    keeps = {int(k) for _, k in pairs}
+    to = np.arange(state.n_experiences, dtype=np.int64)
+    for d, k in pairs:
+        if d == k or d in keeps or not (0 <= d < n_t and 0 <= k < n_t):
+            continue  # as fuse_templates skips it
+        e_k = first_experience(state, int(k))
+        if e_k >= 0:
+            to[state.exp_template == d] = e_k
+    lf, lt = to[state.link_from], to[state.link_to]
+    moved = ((lf != state.link_from) | (lt != state.link_to)) & (lf != lt)
+    if not moved.any():
+        return state
+    p = state.exp_pose
+    dx, dy = p[lt, 0] - p[lf, 0], p[lt, 1] - p[lf, 1]
+    heading = wrap_angle(np.arctan2(dy, dx) - p[lf, 2], include_pi=True)
+    facing = wrap_angle(p[lt, 2] - p[lf, 2], include_pi=True)
+    return dataclasses.replace(
+        state,
+        link_d=np.where(moved, np.hypot(dx, dy), state.link_d),
+        link_heading=np.where(moved, heading, state.link_heading),
+        link_facing=np.where(moved, facing, state.link_facing),
+    )
 
 
 def _merge_record(
@@ -540,16 +593,33 @@ def _place(slam: RatSLAM, image: Any, frame: int, err: float, offset: int) -> di
         "view": _view_of(slam, image).detach().cpu().numpy(),
         "accum": np.asarray(state.extra[EM_ACCUM], np.float64).copy(),
         "pc": np.asarray(state.extra[PC_BEST], np.float64).copy(),
+        "exp": int(state.current_exp),
     }
 
 
 def _with_place(partial: MapState, place: dict[str, Any]) -> MapState:
-    """The partial map with the place of :func:`_place` appended."""
-    return append_place(
-        partial,
-        place["view"],
-        at_accum=place["accum"],
-        at_pc=place["pc"],
-        frame=place["frame"],
-        t=place["t"],
-    )
+    """The partial map with the place of :func:`_place` appended.
+
+    A place passed before the current experience was made (the streak's first match
+    lies before the stored template's place, the confirming one after it) is added
+    where the robot was: linked from the experience current then, at its pose plus the
+    odometry accumulated then; the robot stays at its current experience with its
+    accumulators.
+    """
+    cur = int(partial.current_exp)
+    at = int(place.get("exp", cur))
+    kw = {"at_accum": place["accum"], "at_pc": place["pc"], "frame": place["frame"]}
+    if at == cur or not 0 <= at < partial.n_experiences:
+        return append_place(partial, place["view"], t=place["t"], **kw)
+    then = dataclasses.replace(partial, current_exp=at)
+    out = append_place(then, place["view"], t=place["t"], **kw)
+    extra = {**out.extra, EM_ACCUM: np.array(partial.extra[EM_ACCUM], np.float64, copy=True)}
+    return dataclasses.replace(
+        out,
+        extra=extra,
+        scalars=dict(partial.scalars),
+        current_vt=partial.current_vt,
+        prev_vt=partial.prev_vt,
+        current_exp=cur,
+        prev_exp=partial.prev_exp,
+    ).validate(source="a place passed")

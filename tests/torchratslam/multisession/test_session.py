@@ -18,6 +18,7 @@ from torchratslam.experiments.multisession_seeds import (
 )
 from torchratslam.maps.native import load_state
 from torchratslam.maps.running import apply_state, save_state, state_from_slam
+from torchratslam.maps.state import MapState
 from torchratslam.multisession.session import MultiSessionRatSLAM
 from torchratslam.pipeline import RatSLAM
 from torchratslam.sim import get_tour
@@ -262,6 +263,102 @@ def test_the_view_anchor_joins_the_maps_where_the_view_matches_best():
     assert partial.link_to[-1] == partial.n_experiences - 1
     assert partial.link_from[-1] == partial.n_experiences - 2
     assert nx.is_weakly_connected(at_view.experience_map.graph)
+
+
+def test_the_view_anchor_looks_back_to_the_streaks_first_match():
+    # seed 3004: session 2's first matching template is learnt 7 frames before session
+    # 1's first template, the confirming one 3 frames after it; the best view lies
+    # between them, passed before the match was confirmed. Joined at the confirming
+    # template the places are 1.2 m apart; the view anchor joins them at the passed
+    # frame of the best view (one frame from the stored experience, made at frame 1)
+    tour = get_tour("virtual_tour", seed=3004)
+    slam = RatSLAM(CONFIG)
+    slam.run(tour.sessions[0].frames(), progress=False)
+    stored = state_from_slam(slam)
+    kw = {"merge_options": RECOMMENDED_MERGE_OPTIONS, **RECOMMENDED_SESSION_OPTIONS}
+    at_template, _ = run_session2(tour, stored, 40, **{**kw, "merge_anchor": "template"})
+    at_view, _ = run_session2(tour, stored, 40, **kw)
+    (mt,), (mv,) = at_template.merges, at_view.merges
+    assert _joined_distance(tour, mt) > 1.0
+    assert _joined_distance(tour, mv) <= 0.5
+    # joined at a frame passed before the confirming template (the template merge's frame)
+    assert mv["partial_exp_t"] < mt["frame"] and mv["error"] < mt["error"]
+    # the passed place hangs off the experience current then (not the last one), and
+    # the robot stays at its current experience
+    partial = at_view.snapshots[0]["partial_state"]
+    e = partial.n_experiences - 1
+    assert partial.exp_t[e] == mv["partial_exp_t"]
+    (src,) = partial.link_from[partial.link_to == e]
+    assert partial.exp_t[src] < partial.exp_t[e] < partial.exp_t[:e].max()
+    assert partial.current_exp != e
+    assert nx.is_weakly_connected(at_view.experience_map.graph)
+    # the confirming template, learnt 1.2 m past the joined place, is absorbed, and every
+    # link between the stored map and the partial one has the merged map's geometry
+    # (copied from the dropped experience it would be up to a template spacing off)
+    assert mv["absorbed"]
+    merged = at_view.snapshots[0]["merged_state"]
+    n_loaded = stored.n_experiences
+    cross = (merged.link_from < n_loaded) != (merged.link_to < n_loaded)
+    assert cross.any()
+    p = merged.exp_pose
+    gap = np.hypot(*(p[merged.link_to, :2] - p[merged.link_from, :2]).T)
+    assert np.allclose(merged.link_d[cross], gap[cross], atol=1e-9)
+
+
+def _line_map():
+    """5 templates, 6 experiences on the x axis (experience i at x = i, facing +x;
+    experience 5 at (2, 1) facing +y is template 4, a second view of template 1's
+    place), linked in a chain."""
+    tpl = np.array([0, 1, 2, 3, 1, 4])
+    m, n_t = tpl.size, 5
+    pose = np.c_[np.arange(m), np.zeros(m), np.zeros(m)].astype(np.float64)
+    pose[5] = (2.0, 1.0, np.pi / 2)
+    lf, lt = np.arange(m - 1), np.arange(1, m)
+    return MapState(
+        config={"pc_dim_xy": 40, "pc_dim_th": 36, "template_x_size": 3, "template_y_size": 2},
+        templates=np.arange(n_t * 6, dtype=np.float64).reshape(n_t, 2, 3),
+        template_mean=np.arange(n_t, dtype=np.float64),
+        template_frame=np.arange(n_t, dtype=np.int64),
+        template_pc=np.zeros((n_t, 3)),
+        template_decay=np.ones(n_t),
+        exp_pose=pose,
+        exp_pc=np.zeros((m, 3)),
+        exp_template=tpl,
+        exp_frame=np.arange(m, dtype=np.int64),
+        exp_t=np.arange(m, dtype=np.float64),
+        link_from=lf,
+        link_to=lt,
+        link_d=np.full(m - 1, 7.0),
+        link_heading=np.zeros(m - 1),
+        link_facing=np.zeros(m - 1),
+        link_dt=np.ones(m - 1),
+        activity=np.zeros((0, 0, 0)),
+        current_vt=4,
+        prev_vt=1,
+        current_exp=5,
+        prev_exp=4,
+        frame_index=6,
+    ).validate()
+
+
+def test_absorbed_links_are_measured_between_the_experiences_they_join():
+    from torchratslam.maps.merge import fuse_templates
+    from torchratslam.multisession.session import _remeasured
+
+    state = _line_map()
+    # template 4 onto template 1: the link 4 -> 5 will join 4 to experience 1
+    out = _remeasured(state, [(4, 1)])
+    changed = np.flatnonzero(out.link_d != state.link_d)
+    assert changed.tolist() == [4]  # the only link that ends at experience 5
+    assert out.link_d[4] == pytest.approx(3.0)  # from x = 4 back to x = 1
+    assert out.link_heading[4] == pytest.approx(np.pi)  # behind the source
+    assert out.link_facing[4] == pytest.approx(0.0)  # experience 1 faces +x, as 4 does
+    fused, _, applied = fuse_templates(out, [(4, 1)])
+    assert applied == [(4, 1)]
+    assert list(zip(fused.link_from.tolist(), fused.link_to.tolist()))[-1] == (4, 1)
+    assert fused.link_d[-1] == pytest.approx(3.0)
+    # pairs fuse_templates skips change nothing
+    assert _remeasured(state, [(2, 2), (9, 1)]) is state
 
 
 def test_an_unknown_merge_anchor_is_refused(session1_map):
