@@ -192,7 +192,25 @@ def suburb_side_by_side(build: Path, frames: int, root: Path) -> dict[str, Any]:
         r["modules"] = _py_module_means(out)
         runs[label] = r
     images_mb = frames * _image_bytes(data) / 2**20
-    return {"frames": frames, "data": data, "runs": runs, "images_mb": images_mb}
+    return {
+        "frames": frames,
+        "data": data,
+        "runs": runs,
+        "images_mb": images_mb,
+        "fixed_mb": _fixed_memory(data, root),
+    }
+
+
+def _fixed_memory(data: Path, root: Path) -> float:
+    """Peak memory (MiB) of the default run's command on the first 3 frames: what every
+    run costs before its map (the interpreter, torch, numba and the compiled kernels it
+    loads, the figures it writes)."""
+    out = root / "speed-py-fixed"
+    cmd = [sys.executable, "-m", "torchratslam", "run", "--config", str(data / "config.txt")]
+    cmd += ["--data", str(data), "--out", str(out), "--no-progress", "--overwrite"]
+    cmd += ["--max-frames", "3", "--set", "behaviour=openratslam"]
+    out.mkdir(parents=True, exist_ok=True)
+    return bench_scale.run_peak(cmd, out / "stdout.log")[1]
 
 
 def _py_module_means(out: Path) -> dict[str, float]:
@@ -331,6 +349,17 @@ def print_suburb(res: dict[str, Any]) -> None:
         f"({res['images_mb']:.0f} MiB of images); torchratslam reads frames as it goes. "
         f"torchratslam's figures include its odometry source and the run's outputs.\n"
     )
+    fixed = res.get("fixed_mb")
+    default = runs.get("torchratslam (default)")
+    if fixed is not None and default is not None:
+        own = default["report"]["peak_memory_mb"] - fixed
+        cpp_peak = f"{cpp['report']['peak_memory_mb']:.0f} MiB" if cpp else "not measured"
+        print(
+            f"Memory: the same command on 3 frames peaks at {fixed:.0f} MiB (the interpreter, "
+            f"torch, numba and the compiled kernels it loads, the figures): what importing "
+            f"and loading the package costs. Above it, the {res['frames']}-frame run's own "
+            f"memory is {own:.0f} MiB; the C++'s whole peak: {cpp_peak}.\n"
+        )
     for label, r in runs.items():
         print(format_scale_table(r["report"], title=label) + "\n")
 

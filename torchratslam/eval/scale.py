@@ -21,6 +21,7 @@ import itertools
 import logging
 import resource
 import sys
+from array import array
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -143,7 +144,8 @@ def format_scale_table(report: Mapping[str, Any], *, title: str = "") -> str:
 @dataclass
 class ScaleRecorder:
     """Collects the map size after every frame of a run (pass :meth:`on_step` as the
-    run's ``callback``); :meth:`report` joins them with the run's module timings.
+    run's ``callback``), 8 bytes a count; :meth:`report` joins them with the run's
+    module timings.
 
     Attributes:
         links_of: a function returning the current number of links (optional; the
@@ -151,9 +153,9 @@ class ScaleRecorder:
     """
 
     links_of: Any = None
-    templates: list[int] = field(default_factory=list)
-    experiences: list[int] = field(default_factory=list)
-    links: list[int] = field(default_factory=list)
+    templates: array[int] = field(default_factory=lambda: array("q"))
+    experiences: array[int] = field(default_factory=lambda: array("q"))
+    links: array[int] = field(default_factory=lambda: array("q"))
 
     def on_step(self, step: Any) -> None:
         """Record one :class:`~torchratslam.pipeline.StepResult`."""
