@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 
 from ratslam_graph.errors import GraphError, InputError, MapFormatError
+from ratslam_graph.experience_graph import ExperienceGraph
 from ratslam_graph.experience_map import ExperienceMap
 from ratslam_graph.messages import Action, ActionKind
 from ratslam_graph.params import ExperienceMapParams
@@ -743,3 +744,26 @@ def test_over_relaxation_reaches_the_same_map_in_far_fewer_passes():
     assert early[0.95] < 0.2 * early[0.5]
     err = {c: shape_gap(limit[c], truth) for c in limit}
     assert abs(err[0.95] - err[0.5]) < 0.02 * err[0.5]
+
+
+def test_graph_built_when_read_equals_one_read_after_every_change():
+    """The networkx mirror is filled when read: reading it after every change or only at
+    the end gives the same nodes, edges (in order) and attributes, removals included."""
+    rng = np.random.default_rng(7)
+    eager, lazy = ExperienceGraph(), ExperienceGraph()
+    for step in range(120):
+        for g in (eager, lazy):
+            while (step % 3 == 0 and g.n <= step // 3) or g.n < 2:
+                g.add_experience(float(g.n), 0.5 * step, 0.1 * step, pc=(1.0, 2.0, 3.0))
+        a, b = (int(v) for v in rng.choice(eager.n, 2, replace=False))
+        for g in (eager, lazy):
+            g.add_link(a, b, 1.0 + step, 0.2, -0.3, 0.5, behaviour=step % 2)
+        if step % 17 == 16:  # remove the oldest link, and count a transition
+            s, d = int(eager.src[0]), int(eager.dst[0])
+            for g in (eager, lazy):
+                g.remove_link(s, d)
+                g.count_transition(a, b, step % 2, 0.0)
+        eager.graph  # noqa: B018 - read after every change
+    assert list(lazy.graph.nodes(data=True)) == list(eager.graph.nodes(data=True))
+    assert list(lazy.graph.edges(data=True)) == list(eager.graph.edges(data=True))
+    assert lazy.graph.number_of_edges() == lazy.e
