@@ -212,6 +212,7 @@ def compose_odometry(
     edges = np.asarray(edges, dtype=np.int64).reshape(-1, 2)
     meas = np.asarray(measurements, dtype=np.float64).reshape(-1, 3)
     step = np.full((num_poses, 3), np.nan)
+    have = np.zeros(num_poses, dtype=bool)  # nodes with a step (its values may be NaN)
     fwd = edges[:, 1] == edges[:, 0] + 1
     bwd = edges[:, 0] == edges[:, 1] + 1
     # inverse of a backward measurement gives the forward step
@@ -220,8 +221,9 @@ def compose_odometry(
         idx = np.maximum(edges[mask, 0], edges[mask, 1])
         rows, first = np.unique(idx, return_index=True)  # first edge in file order
         step[rows] = vals[first]
-    if num_poses > 1 and np.isnan(step[1:]).any():
-        missing = int(np.flatnonzero(np.isnan(step[1:, 0]))[0]) + 1
+        have[rows] = True
+    if num_poses > 1 and not have[1:].all():
+        missing = int(np.flatnonzero(~have[1:])[0]) + 1
         raise InputError(
             f"cannot compose odometry: no edge between nodes {missing - 1} and {missing}; "
             "give initial poses (VERTEX lines) instead"
