@@ -235,12 +235,10 @@ def _joined_distance(tour, merge):
     return float(np.linalg.norm(a - b))
 
 
-def test_the_view_anchor_joins_the_maps_where_the_view_matches_best():
-    # seed 26: session 2's second matching template is learnt 3 frames before the stored
-    # template it matches (the templates of the two sessions are learnt out of step), so
-    # the merge at the template joins places 1.2 m apart; following the view to its best
-    # match joins them within one frame (0.4 m)
-    tour = get_tour("virtual_tour", seed=26)
+def _merged_at_template_and_at_view(seed: int):
+    """Session 1 of the virtual tour stored, session 2's first 40 frames merged with the
+    recommended merge anchored at the template and at the view."""
+    tour = get_tour("virtual_tour", seed=seed)
     slam = RatSLAM(CONFIG)
     slam.run(tour.sessions[0].frames(), progress=False)
     stored = state_from_slam(slam)
@@ -248,6 +246,15 @@ def test_the_view_anchor_joins_the_maps_where_the_view_matches_best():
     assert kw["merge_anchor"] == "view"  # the recommended merge anchors at the view
     at_template, _ = run_session2(tour, stored, 40, **{**kw, "merge_anchor": "template"})
     at_view, _ = run_session2(tour, stored, 40, **kw)
+    return tour, stored, at_template, at_view
+
+
+def test_the_view_anchor_joins_the_maps_where_the_view_matches_best():
+    # seed 26: session 2's second matching template is learnt 3 frames before the stored
+    # template it matches (the templates of the two sessions are learnt out of step), so
+    # the merge at the template joins places 1.2 m apart; following the view to its best
+    # match joins them within one frame (0.4 m)
+    tour, stored, at_template, at_view = _merged_at_template_and_at_view(26)
     (mt,), (mv,) = at_template.merges, at_view.merges
     assert _joined_distance(tour, mt) > 1.0
     assert _joined_distance(tour, mv) <= 0.5
@@ -271,13 +278,7 @@ def test_the_view_anchor_looks_back_to_the_streaks_first_match():
     # between them, passed before the match was confirmed. Joined at the confirming
     # template the places are 1.2 m apart; the view anchor joins them at the passed
     # frame of the best view (one frame from the stored experience, made at frame 1)
-    tour = get_tour("virtual_tour", seed=3004)
-    slam = RatSLAM(CONFIG)
-    slam.run(tour.sessions[0].frames(), progress=False)
-    stored = state_from_slam(slam)
-    kw = {"merge_options": RECOMMENDED_MERGE_OPTIONS, **RECOMMENDED_SESSION_OPTIONS}
-    at_template, _ = run_session2(tour, stored, 40, **{**kw, "merge_anchor": "template"})
-    at_view, _ = run_session2(tour, stored, 40, **kw)
+    tour, stored, at_template, at_view = _merged_at_template_and_at_view(3004)
     (mt,), (mv,) = at_template.merges, at_view.merges
     assert _joined_distance(tour, mt) > 1.0
     assert _joined_distance(tour, mv) <= 0.5
