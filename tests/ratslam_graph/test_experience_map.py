@@ -594,6 +594,68 @@ def test_compiled_sweep_is_the_brute_force_loop_bit_for_bit(passes):
     assert ran == passes or np.array_equal(again, got)
 
 
+@pytest.mark.parametrize("bridge", [False, True])
+def test_compiled_sweep_skipping_settled_links_is_the_brute_force_loop_bit_for_bit(bridge):
+    """Links whose updates change nothing are skipped by the compiled sweep; the map must
+    still be every update's, to the bit (signs of zero included): a chain that is exactly
+    consistent (every update a no-op) interleaved with a loop that keeps moving, and with
+    ``bridge`` one link from the moving loop into the settled chain, which disturbs it a
+    little more each pass; a few poses sit at exactly 0.0 or -0.0."""
+    from ratslam_graph.backends.alpha import reference_order, sweep_openratslam
+
+    rng = np.random.default_rng(7)
+    m = 30
+    poses = np.zeros((2 * m, 3))
+    # even ids: a straight chain, each link exactly (1 m ahead, same facing): cos(0) = 1
+    poses[0::2] = np.stack([np.arange(m) + 1.0, np.full(m, 3.0), np.full(m, 0.5)], 1)
+    # odd ids: a noisy loop
+    poses[1::2] = np.stack([rng.normal(0, 5, m), rng.normal(0, 5, m), rng.uniform(-PI, PI, m)], 1)
+    poses[1] = (0.0, -0.0, 0.0)
+    poses[3, 1] = -0.0
+    ends = [(2 * i, 2 * i + 2) for i in range(m - 1)]
+    ends += [(2 * i + 1, 2 * i + 3) for i in range(m - 1)] + [(2 * m - 1, 1)]
+    if bridge:
+        ends.append((2 * m - 1, 2 * (m // 2)))
+    src = np.array([a for a, _ in ends])
+    dst = np.array([b for _, b in ends])
+    link = np.array(
+        [(1.0, -0.5, 0.0) if a % 2 == 0 else tuple(rng.uniform(-1, 2, 3)) for a, _ in ends]
+    )
+    link[:, 0] = np.abs(link[:, 0])
+    passes = 60
+    want = brute_force_sweep(poses, src.tolist(), dst.tolist(), link.tolist(), passes, 0.5)
+    order = reference_order(np.stack([src, dst], 1))
+    got = np.ascontiguousarray(poses.copy())
+    ran = sweep_openratslam(got, src[order], dst[order], link[order], passes, 0.5)
+    assert ran == passes
+    assert got.tobytes() == want.tobytes()
+    chain_moved = not np.array_equal(got[0::2], poses[0::2])
+    assert chain_moved == bridge  # settled without the bridge, disturbed with it
+
+
+def test_compiled_sweep_never_skips_a_link_whose_no_op_may_have_flipped_a_zero():
+    """``-0.0 == 0.0``: an update that turns -0.0 into 0.0 changes no value but changes
+    what the next update computes (here the target's y ends -0.0 if that update is
+    skipped, 0.0 if it runs, as the brute-force loop runs it)."""
+    from ratslam_graph.backends.alpha import sweep_openratslam
+
+    poses = np.array(
+        [
+            [-0.0, -0.0, -0.0],
+            [-0.0, -1.0, 1.0],
+            [1.0, 1.0, 1.0],
+            [2.0, -1.0, -0.0],
+            [0.0, -0.0, -0.0],
+        ]
+    )
+    src, dst, link = [0, 1], [4, 2], [[0.0, -0.0, 0.0], [0.0, 0.0, -0.0]]  # by source
+    want = brute_force_sweep(poses, src, dst, link, 8, 0.5)
+    got = poses.copy()
+    sweep_openratslam(got, np.array(src), np.array(dst), np.array(link), 8, 0.5)
+    assert got.tobytes() == want.tobytes()
+    assert math.copysign(1.0, want[4, 1]) == 1.0 and math.copysign(1.0, poses[4, 1]) == -1.0
+
+
 @pytest.mark.parametrize("seed", [0, 1])
 def test_default_map_is_openratslams_with_its_own_backend(seed):
     """The default parameters (OpenRatSLAM's behaviour) and the default backend (the

@@ -55,9 +55,12 @@ def get_signed_delta_rad(a1: float, a2: float) -> float:  # pragma: no cover - c
 @njit(cache=True, nogil=True, inline="always")
 def relax_link(
     pose: np.ndarray, f: int, t: int, link: np.ndarray, k: int, c: float
-) -> bool:  # pragma: no cover - compiled
-    """OpenRatSLAM's update of one link ``k`` (``f -> t``), in place, its arithmetic;
-    True if any value changed."""
+) -> int:  # pragma: no cover - compiled
+    """OpenRatSLAM's update of one link ``k`` (``f -> t``), in place, its arithmetic.
+
+    Returns:
+        Which end changed value: 0 neither, 1 the source, 2 the target, 3 both.
+    """
     xf = pose[f, 0]
     yf = pose[f, 1]
     thf = pose[f, 2]
@@ -82,7 +85,17 @@ def relax_link(
     pose[t, 1] = nyt
     pose[f, 2] = nthf
     pose[t, 2] = ntht
-    return nxf != xf or nyf != yf or nxt != xt or nyt != yt or nthf != thf or ntht != tht
+    moved_f = nxf != xf or nyf != yf or nthf != thf
+    moved_t = nxt != xt or nyt != yt or ntht != tht
+    return (1 if moved_f else 0) | (2 if moved_t else 0)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _settled(pose: np.ndarray, f: int, t: int) -> bool:  # pragma: no cover - compiled
+    """True if no coordinate of the two ends is zero (a product that underflows to zero
+    only says False, the safe answer): for non-zero floats an equal value is an equal
+    bit pattern, so an update that changed no value changed no bit."""
+    return pose[f, 0] * pose[f, 1] * pose[f, 2] * pose[t, 0] * pose[t, 1] * pose[t, 2] != 0.0
 
 
 @njit(cache=True, nogil=True)
@@ -96,18 +109,40 @@ def sweep(
 ) -> int:  # pragma: no cover - compiled
     """``passes`` in-place passes over the links in the given order; returns passes run.
 
-    Stops after a pass that changed no value (every later pass would repeat it).
+    Stops after a pass that changed no value (every later pass would repeat it). A link
+    whose last update changed nothing, and whose two ends have not changed since, is
+    skipped: its update is a function of those two poses and the link alone, so it would
+    change nothing again (the map is the one every update would make, bit for bit; ends
+    with a zero coordinate are never skipped, because ``0.0 == -0.0``).
 
     Shape:
         pose: (N, 3); src, dst: (E,); link: (E, 3) ``[d, heading, facing]``.
     """
+    e = src.shape[0]
+    moved = np.zeros(pose.shape[0], np.int64)  # updates that changed each experience
+    still = np.full((e, 2), -1, np.int64)  # its ends' counts when a link's update changed nothing
     ran = 0
     for _ in range(passes):
         ran += 1
         changed = False
-        for k in range(src.shape[0]):
-            if relax_link(pose, src[k], dst[k], link, k, c):
+        for k in range(e):
+            f = src[k]
+            t = dst[k]
+            mf = moved[f]
+            mt = moved[t]
+            if still[k, 0] == mf and still[k, 1] == mt:
+                continue
+            which = relax_link(pose, f, t, link, k, c)
+            if which:
                 changed = True
+                if which & 1:
+                    moved[f] = mf + 1
+                if which & 2:
+                    moved[t] = moved[t] + 1
+                still[k, 0] = -1
+            elif _settled(pose, f, t):
+                still[k, 0] = mf
+                still[k, 1] = mt
         if not changed:
             break
     return ran
@@ -136,7 +171,7 @@ def sweep_window(
     k = start % e
     changed = False
     for _ in range(count):
-        if relax_link(pose, src[k], dst[k], link, k, c):
+        if relax_link(pose, src[k], dst[k], link, k, c) != 0:
             changed = True
         k += 1
         if k == e:
