@@ -601,6 +601,7 @@ def test_compiled_sweep_skipping_settled_links_is_the_brute_force_loop_bit_for_b
     consistent (every update a no-op) interleaved with a loop that keeps moving, and with
     ``bridge`` one link from the moving loop into the settled chain, which disturbs it a
     little more each pass; a few poses sit at exactly 0.0 or -0.0."""
+    from ratslam_graph.backends._sweep import sweep_skipping
     from ratslam_graph.backends.alpha import reference_order, sweep_openratslam
 
     rng = np.random.default_rng(7)
@@ -629,16 +630,28 @@ def test_compiled_sweep_skipping_settled_links_is_the_brute_force_loop_bit_for_b
     ran = sweep_openratslam(got, src[order], dst[order], link[order], passes, 0.5)
     assert ran == passes
     assert got.tobytes() == want.tobytes()
+    alone = np.ascontiguousarray(poses.copy())  # skipping from the first pass on
+    sweep_skipping(alone, src[order], dst[order], np.ascontiguousarray(link[order]), passes, 0.5)
+    assert alone.tobytes() == want.tobytes()
     chain_moved = not np.array_equal(got[0::2], poses[0::2])
     assert chain_moved == bridge  # settled without the bridge, disturbed with it
 
 
-def test_compiled_sweep_never_skips_a_link_whose_no_op_may_have_flipped_a_zero():
-    """``-0.0 == 0.0``: an update that turns -0.0 into 0.0 changes no value but changes
-    what the next update computes (here the target's y ends -0.0 if that update is
-    skipped, 0.0 if it runs, as the brute-force loop runs it)."""
-    from ratslam_graph.backends.alpha import sweep_openratslam
+def test_compiled_sweep_never_trusts_a_zero_end_and_keeps_zero_signs():
+    """``-0.0 == 0.0``: an update that changed no value may still have turned -0.0 into
+    0.0, so a link with a zero coordinate at either end is never skipped (an underflowing
+    product only errs that way); and maps full of signed zeros, beside an exactly
+    consistent chain so that skipping is on, come out as the brute-force loop's, to the
+    bit."""
+    from ratslam_graph.backends._sweep import _settled, sweep_skipping
+    from ratslam_graph.backends.alpha import reference_order, sweep_openratslam
 
+    pose = np.array([[1.0, 2.0, 3.0], [4.0, 5.0, 0.5], [1.0, -0.0, 3.0], [1e-200, 1e-200, 1.0]])
+    assert _settled(pose, 0, 1)
+    assert not _settled(pose, 0, 2) and not _settled(pose, 2, 1)
+    assert not _settled(pose, 3, 0)  # not zero, but the product underflows: not trusted
+    # skipping from the first pass: the update of 0 -> 4 turns 4's y from -0.0 into 0.0
+    # and changes no value; were it skipped afterwards, 4's y would end -0.0
     poses = np.array(
         [
             [-0.0, -0.0, -0.0],
@@ -651,9 +664,37 @@ def test_compiled_sweep_never_skips_a_link_whose_no_op_may_have_flipped_a_zero()
     src, dst, link = [0, 1], [4, 2], [[0.0, -0.0, 0.0], [0.0, 0.0, -0.0]]  # by source
     want = brute_force_sweep(poses, src, dst, link, 8, 0.5)
     got = poses.copy()
-    sweep_openratslam(got, np.array(src), np.array(dst), np.array(link), 8, 0.5)
+    sweep_skipping(got, np.array(src), np.array(dst), np.array(link), 8, 0.5)
     assert got.tobytes() == want.tobytes()
     assert math.copysign(1.0, want[4, 1]) == 1.0 and math.copysign(1.0, poses[4, 1]) == -1.0
+    chain = np.array([[1.0, 3.0, 0.5], [2.0, 3.0, 0.5], [3.0, 3.0, 0.5], [4.0, 3.0, 0.5]])
+    for seed in range(40):
+        rng = np.random.default_rng(seed)
+        n = 6
+        poses = np.concatenate([rng.choice([0.0, -0.0, -0.0, 1.0, -1.0], (n, 3)), chain])
+        ends = [(int(a), int(b)) for a, b in rng.integers(0, n, (8, 2)) if a != b]
+        ends += [(n, n + 1), (n + 1, n + 2), (n + 2, n + 3)]
+        m = len(ends) - 3
+        link = np.concatenate(
+            [
+                np.stack(
+                    [
+                        rng.choice([0.0, 1.0], m),
+                        rng.choice([0.0, -0.0, PI, PI / 2], m),
+                        rng.choice([0.0, -0.0], m),
+                    ],
+                    1,
+                ),
+                [[1.0, -0.5, 0.0]] * 3,
+            ]
+        )
+        src = np.array([a for a, _ in ends])
+        dst = np.array([b for _, b in ends])
+        want = brute_force_sweep(poses, src.tolist(), dst.tolist(), link.tolist(), 12, 0.5)
+        order = reference_order(np.stack([src, dst], 1))
+        got = poses.copy()
+        sweep_openratslam(got, src[order], dst[order], np.ascontiguousarray(link[order]), 12, 0.5)
+        assert got.tobytes() == want.tobytes(), seed
 
 
 @pytest.mark.parametrize("seed", [0, 1])

@@ -20,6 +20,12 @@ from numba import njit
 
 PI = math.pi
 TWO_PI = 2.0 * math.pi
+CHECK_EVERY = 8
+""":func:`sweep` counts the updates that changed nothing in its first pass and in every
+this many passes after it."""
+IDLE_SHARE = 16
+"""Once at least one update in this many changed nothing in a counted pass, :func:`sweep`
+goes on in :func:`sweep_skipping`."""
 
 
 @njit(cache=True, nogil=True)
@@ -55,12 +61,9 @@ def get_signed_delta_rad(a1: float, a2: float) -> float:  # pragma: no cover - c
 @njit(cache=True, nogil=True, inline="always")
 def relax_link(
     pose: np.ndarray, f: int, t: int, link: np.ndarray, k: int, c: float
-) -> int:  # pragma: no cover - compiled
-    """OpenRatSLAM's update of one link ``k`` (``f -> t``), in place, its arithmetic.
-
-    Returns:
-        Which end changed value: 0 neither, 1 the source, 2 the target, 3 both.
-    """
+) -> bool:  # pragma: no cover - compiled
+    """OpenRatSLAM's update of one link ``k`` (``f -> t``), in place, its arithmetic;
+    True if any value changed."""
     xf = pose[f, 0]
     yf = pose[f, 1]
     thf = pose[f, 2]
@@ -85,9 +88,7 @@ def relax_link(
     pose[t, 1] = nyt
     pose[f, 2] = nthf
     pose[t, 2] = ntht
-    moved_f = nxf != xf or nyf != yf or nthf != thf
-    moved_t = nxt != xt or nyt != yt or ntht != tht
-    return (1 if moved_f else 0) | (2 if moved_t else 0)
+    return nxf != xf or nyf != yf or nxt != xt or nyt != yt or nthf != thf or ntht != tht
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -109,11 +110,53 @@ def sweep(
 ) -> int:  # pragma: no cover - compiled
     """``passes`` in-place passes over the links in the given order; returns passes run.
 
-    Stops after a pass that changed no value (every later pass would repeat it). A link
-    whose last update changed nothing, and whose two ends have not changed since, is
-    skipped: its update is a function of those two poses and the link alone, so it would
-    change nothing again (the map is the one every update would make, bit for bit; ends
-    with a zero coordinate are never skipped, because ``0.0 == -0.0``).
+    Stops after a pass that changed no value (every later pass would repeat it). After a
+    pass in which at least one update in :data:`IDLE_SHARE` changed nothing (counted in
+    the first pass and every :data:`CHECK_EVERY` passes after it), the rest go on in
+    :func:`sweep_skipping`, which skips updates that cannot change anything; maps that
+    move everywhere (most long ones) are swept without its bookkeeping.
+
+    Shape:
+        pose: (N, 3); src, dst: (E,); link: (E, 3) ``[d, heading, facing]``.
+    """
+    e = src.shape[0]
+    for ran in range(1, passes + 1):
+        changed = False
+        if ran % CHECK_EVERY != 1:
+            for k in range(e):
+                if relax_link(pose, src[k], dst[k], link, k, c):
+                    changed = True
+            if not changed:
+                return ran
+            continue
+        idle = 0  # a pass that counts the updates that changed nothing
+        for k in range(e):
+            if relax_link(pose, src[k], dst[k], link, k, c):
+                changed = True
+            else:
+                idle += 1
+        if not changed:
+            return ran
+        if IDLE_SHARE * idle >= e and ran < passes:
+            return ran + sweep_skipping(pose, src, dst, link, passes - ran, c)
+    return passes
+
+
+@njit(cache=True, nogil=True)
+def sweep_skipping(
+    pose: np.ndarray,
+    src: np.ndarray,
+    dst: np.ndarray,
+    link: np.ndarray,
+    passes: int,
+    c: float,
+) -> int:  # pragma: no cover - compiled
+    """:func:`sweep`'s passes, skipping exactly the updates that cannot change anything.
+
+    A link whose last update changed no value, and whose two ends have not changed since,
+    is skipped: its update is a function of those two poses and the link alone, so it
+    would change nothing again. The map is the one every update would make, bit for bit;
+    ends with a zero coordinate are never trusted (``0.0 == -0.0`` hides a changed bit).
 
     Shape:
         pose: (N, 3); src, dst: (E,); link: (E, 3) ``[d, heading, facing]``.
@@ -121,9 +164,7 @@ def sweep(
     e = src.shape[0]
     moved = np.zeros(pose.shape[0], np.int64)  # updates that changed each experience
     still = np.full((e, 2), -1, np.int64)  # its ends' counts when a link's update changed nothing
-    ran = 0
-    for _ in range(passes):
-        ran += 1
+    for ran in range(1, passes + 1):
         changed = False
         for k in range(e):
             f = src[k]
@@ -132,20 +173,21 @@ def sweep(
             mt = moved[t]
             if still[k, 0] == mf and still[k, 1] == mt:
                 continue
-            which = relax_link(pose, f, t, link, k, c)
-            if which:
+            xf, yf, thf = pose[f, 0], pose[f, 1], pose[f, 2]
+            xt, yt, tht = pose[t, 0], pose[t, 1], pose[t, 2]
+            if relax_link(pose, f, t, link, k, c):
                 changed = True
-                if which & 1:
-                    moved[f] = mf + 1
-                if which & 2:
-                    moved[t] = moved[t] + 1
+                if pose[f, 0] != xf or pose[f, 1] != yf or pose[f, 2] != thf:
+                    moved[f] += 1
+                if pose[t, 0] != xt or pose[t, 1] != yt or pose[t, 2] != tht:
+                    moved[t] += 1
                 still[k, 0] = -1
             elif _settled(pose, f, t):
                 still[k, 0] = mf
                 still[k, 1] = mt
         if not changed:
-            break
-    return ran
+            return ran
+    return passes
 
 
 @njit(cache=True, nogil=True)
@@ -171,7 +213,7 @@ def sweep_window(
     k = start % e
     changed = False
     for _ in range(count):
-        if relax_link(pose, src[k], dst[k], link, k, c) != 0:
+        if relax_link(pose, src[k], dst[k], link, k, c):
             changed = True
         k += 1
         if k == e:
