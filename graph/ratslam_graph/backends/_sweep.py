@@ -20,12 +20,9 @@ from numba import njit
 
 PI = math.pi
 TWO_PI = 2.0 * math.pi
-CHECK_EVERY = 8
-""":func:`sweep` counts the updates that changed nothing in its first pass and in every
-this many passes after it."""
 IDLE_SHARE = 16
-"""Once at least one update in this many changed nothing in a counted pass, :func:`sweep`
-goes on in :func:`sweep_skipping`."""
+"""Once at least one update in this many changed nothing in a pass, :func:`sweep` goes
+on in :func:`sweep_skipping`."""
 
 
 @njit(cache=True, nogil=True)
@@ -99,6 +96,18 @@ def _settled(pose: np.ndarray, f: int, t: int) -> bool:  # pragma: no cover - co
     return pose[f, 0] * pose[f, 1] * pose[f, 2] * pose[t, 0] * pose[t, 1] * pose[t, 2] != 0.0
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _idle_pass(
+    pose: np.ndarray, src: np.ndarray, dst: np.ndarray, link: np.ndarray, c: float
+) -> int:  # pragma: no cover - compiled
+    """One pass over the links in the given order; how many updates changed nothing."""
+    idle = 0
+    for k in range(src.shape[0]):
+        if not relax_link(pose, src[k], dst[k], link, k, c):
+            idle += 1
+    return idle
+
+
 @njit(cache=True, nogil=True)
 def sweep(
     pose: np.ndarray,
@@ -111,31 +120,17 @@ def sweep(
     """``passes`` in-place passes over the links in the given order; returns passes run.
 
     Stops after a pass that changed no value (every later pass would repeat it). After a
-    pass in which at least one update in :data:`IDLE_SHARE` changed nothing (counted in
-    the first pass and every :data:`CHECK_EVERY` passes after it), the rest go on in
-    :func:`sweep_skipping`, which skips updates that cannot change anything; maps that
-    move everywhere (most long ones) are swept without its bookkeeping.
+    pass in which at least one update in :data:`IDLE_SHARE` changed nothing, the rest go
+    on in :func:`sweep_skipping`, which skips updates that cannot change anything; maps
+    that move everywhere (most long ones) are swept without its bookkeeping.
 
     Shape:
         pose: (N, 3); src, dst: (E,); link: (E, 3) ``[d, heading, facing]``.
     """
     e = src.shape[0]
     for ran in range(1, passes + 1):
-        changed = False
-        if ran % CHECK_EVERY != 1:
-            for k in range(e):
-                if relax_link(pose, src[k], dst[k], link, k, c):
-                    changed = True
-            if not changed:
-                return ran
-            continue
-        idle = 0  # a pass that counts the updates that changed nothing
-        for k in range(e):
-            if relax_link(pose, src[k], dst[k], link, k, c):
-                changed = True
-            else:
-                idle += 1
-        if not changed:
+        idle = _idle_pass(pose, src, dst, link, c)
+        if idle == e:
             return ran
         if IDLE_SHARE * idle >= e and ran < passes:
             return ran + sweep_skipping(pose, src, dst, link, passes - ran, c)
