@@ -14,11 +14,12 @@ $(BIN)/python:
 	$(PY) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
 
-# Torch first (the pinned CPU build), then the project and its dev extras (what the
-# tests need; the tests of an optional extra skip, naming it, when it is absent).
+# Torch first (the pinned CPU build), then the project (both packages, torchratslam and
+# ratslam_graph) and its dev extras (what the tests need; the tests of an optional extra
+# skip, naming it, when it is absent).
 $(STAMP): $(BIN)/python pyproject.toml graph/pyproject.toml
 	$(BIN)/python -m pip install --quiet $(TORCH)
-	$(BIN)/python -m pip install --quiet -e ./graph -e ".[dev]"
+	$(BIN)/python -m pip install --quiet -e ".[dev]"
 	touch $(STAMP)
 
 # One optional extra (docs, viewer, tune, ray, parquet, gym, evo, all) on top of dev.

@@ -14,6 +14,8 @@ Usage:
     python -m benchmarks.openratslam traces [--out tests/data/openratslam]
         (re)writes the golden traces (needs the build; renders the datasets into a
         temporary folder first).
+    python -m benchmarks.openratslam long-traces [--out tests/data/openratslam]
+        the same for the long sequences of the default's frame-for-frame guard.
 """
 
 from __future__ import annotations
@@ -121,6 +123,29 @@ TRACE_SETS = (
         LOOP_TXT.format(threshold=0.015),
         600,
         "the corridor loop with a strict match threshold: more than 500 templates",
+    ),
+)
+
+#: Long end-to-end sequences for the frame-for-frame guard of the default
+#: (``tests/torchratslam/test_openratslam_long_traces.py``): many near-ties, so a run whose
+#: decisions are not the C++'s own (float32's rounding, a reordered sum) parts from the
+#: trace. Written compactly (:data:`LONG_TRACE_COLUMNS`, gzip).
+LONG_TRACE_SETS = (
+    Dataset(
+        "loop_30_laps",
+        "sim:loop?seed=11&laps=30",
+        LOOP_TXT.format(threshold=0.06),
+        None,
+        "a corridor loop (seed 11) driven 30 times: hundreds of loop closures onto the same "
+        "experiences, the packet passing them again and again near the creation threshold",
+    ),
+    Dataset(
+        "figure_eight",
+        "sim:bicocca_like?seed=5",
+        LOOP_TXT.format(threshold=0.06),
+        None,
+        "two ring corridors joined by a passage driven both ways (a figure of eight, seed 5): "
+        "the passage re-seen in the other direction, templates of both rings alike",
     ),
 )
 
@@ -238,14 +263,23 @@ TRACE_COLUMNS = (
 )
 
 
-def write_trace(ds: Dataset, data: Path, cpp: Path, dest: Path) -> dict:
+#: The per-frame columns of a long trace (:data:`LONG_TRACE_SETS`): the decisions only.
+LONG_TRACE_COLUMNS = ("frame", "vt_id", "action", "src_exp_id", "current_exp_id", "em_current_id")
+
+
+def write_trace(
+    ds: Dataset, data: Path, cpp: Path, dest: Path, columns: tuple[str, ...] = TRACE_COLUMNS
+) -> dict:
     """Copy one C++ run into ``dest`` as golden trace files.
 
     ``frames.csv``: per frame the odometry row the C++ read (``t, vtrans, vrot`` as
     written in ``odometry.csv``), the CRC-32 of the frame's pixels and the C++'s
-    per-frame outputs (:data:`TRACE_COLUMNS`, printed with 17 significant digits);
+    per-frame outputs (``columns``, as the C++ printed them: 17 significant digits);
+    ``frames.csv.gz`` instead when ``columns`` is :data:`LONG_TRACE_COLUMNS`;
     ``experiences.csv`` and ``links.csv``: the C++'s final map, as it wrote them.
     """
+    import gzip
+
     import cv2
 
     dest.mkdir(parents=True, exist_ok=True)
@@ -254,14 +288,17 @@ def write_trace(ds: Dataset, data: Path, cpp: Path, dest: Path) -> dict:
     with open(cpp / "frames.csv") as f:
         rows = list(csv.DictReader(f))
     pngs = sorted((data / "frames").glob("*.png"))
-    with open(dest / "frames.csv", "w", newline="") as f:
+    compact = columns == LONG_TRACE_COLUMNS
+    path = dest / ("frames.csv.gz" if compact else "frames.csv")
+    opener = gzip.open(path, "wt", newline="") if compact else open(path, "w", newline="")
+    with opener as f:
         w = csv.writer(f, lineterminator="\n")
-        w.writerow(["t", "vtrans", "vrot", "crc32", *TRACE_COLUMNS])
+        w.writerow(["t", "vtrans", "vrot", "crc32", *columns])
         for k, r in enumerate(rows):
             img = cv2.imread(str(pngs[k]), cv2.IMREAD_UNCHANGED)
             crc = zlib.crc32(np.ascontiguousarray(img).tobytes())
             o = odo[k]
-            w.writerow([o["t"], o["vtrans"], o["vrot"], crc, *(r[c] for c in TRACE_COLUMNS)])
+            w.writerow([o["t"], o["vtrans"], o["vrot"], crc, *(r[c] for c in columns)])
     for name in ("experiences.csv", "links.csv"):
         shutil.copyfile(cpp / name, dest / name)
     (dest / "config.txt").write_text(ds.config)
@@ -278,26 +315,28 @@ def write_trace(ds: Dataset, data: Path, cpp: Path, dest: Path) -> dict:
     return meta
 
 
-def make_traces(build: Path, out: Path) -> None:
-    """Render every :data:`TRACE_SETS` dataset, run the C++ on it, write its trace."""
+def make_traces(build: Path, out: Path, long: bool = False) -> None:
+    """Render every :data:`TRACE_SETS` dataset (:data:`LONG_TRACE_SETS` with ``long``),
+    run the C++ on it, write its trace."""
+    sets, columns = (LONG_TRACE_SETS, LONG_TRACE_COLUMNS) if long else (TRACE_SETS, TRACE_COLUMNS)
     with tempfile.TemporaryDirectory() as tmp:
-        for ds in TRACE_SETS:
+        for ds in sets:
             data = write_dataset_dir(ds, Path(tmp) / ds.name)
             cpp = Path(tmp) / f"{ds.name}_cpp"
             run_cpp(build, data, cpp)
-            meta = write_trace(ds, data, cpp, out / ds.name)
+            meta = write_trace(ds, data, cpp, out / ds.name, columns)
             print(f"{ds.name}: {meta}")
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(prog="python -m benchmarks.openratslam")
-    ap.add_argument("what", choices=("traces",))
+    ap.add_argument("what", choices=("traces", "long-traces"))
     ap.add_argument("--out", type=Path, default=TRACES)
     a = ap.parse_args()
     build = find_build()
     if build is None:
         raise SystemExit(BUILD_HELP)
-    make_traces(build, a.out)
+    make_traces(build, a.out, long=a.what == "long-traces")
 
 
 if __name__ == "__main__":

@@ -83,6 +83,13 @@ class GeneralParams(Params):
         "recommended choices); sets every key of PROFILES that the config does not set itself",
         choices=("openratslam", "torchratslam"),
     )
+    dtype: str = param(
+        "float64",
+        "precision of the pose cells, templates and view comparison: float64 (OpenRatSLAM's "
+        "double, the default: its decisions exactly) | float32 (half the memory; decisions "
+        "within float32's rounding of a threshold or a tie may go the other way)",
+        choices=("float64", "float32"),
+    )
     skip_first_odometry: bool = param(
         True,
         "no pose-cell step, no action and no experience-map odometry at frame 0, as "

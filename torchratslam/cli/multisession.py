@@ -164,6 +164,8 @@ def register(subparsers: Any) -> argparse.ArgumentParser:
 
 
 RUNNING = "running.json"
+# What a finished multisession run leaves in OUT: one experiment's report, a seed table.
+FINISHED = ("report.json", "seeds.json")
 
 
 class _Running:
@@ -180,6 +182,12 @@ class _Running:
             raise InputError(
                 f"{out} holds a multisession run that did not finish ({RUNNING}); it cannot "
                 "be resumed: start it again with --overwrite, or choose another --out"
+            )
+        done = [n for n in FINISHED if (out / n).is_file()]
+        if done and not overwrite:
+            raise InputError(
+                f"{out} holds a finished multisession run ({done[0]}); choose another --out, "
+                "or replace it with --overwrite"
             )
 
     def __enter__(self) -> _Running:

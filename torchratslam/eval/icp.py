@@ -234,13 +234,19 @@ class LibIcpStarts:
 
     @property
     def best(self) -> LibIcpResult:
-        """The start with the smallest residual; the identity when it is within ``rtol``
-        of it (the same minimum)."""
-        return self.identity if self.identity_is_best else self._lowest
+        """The best minimum, by a stated rule: of the starts whose residuals lie within
+        ``rtol`` of the smallest (the same minimum), the first in the order tried (the
+        identity first, then the angles as given). Starts that reach one minimum differ
+        only by rounding, which differs between CPU kernels; the rule never lets it pick."""
+        return self._lowest
 
     @property
     def _lowest(self) -> LibIcpResult:
-        return min(self.results, key=lambda r: r.residual_m2)
+        low = min(r.residual_m2 for r in self.results)
+        return next(r for r in self.results if self._same_minimum(r.residual_m2, low))
+
+    def _same_minimum(self, residual: float, low: float) -> bool:
+        return residual <= low * (1.0 + self.rtol) + 1e-15
 
     @property
     def spread_m2(self) -> float:
@@ -252,12 +258,12 @@ class LibIcpStarts:
     def starts_agree(self) -> bool:
         """Every start ended in the same minimum (residuals within ``rtol``)."""
         res = [r.residual_m2 for r in self.results]
-        return max(res) <= min(res) * (1.0 + self.rtol) + 1e-15
+        return self._same_minimum(max(res), min(res))
 
     @property
     def identity_is_best(self) -> bool:
         """The identity start's minimum is the best one (within ``rtol``)."""
-        return self.identity.residual_m2 <= self._lowest.residual_m2 * (1.0 + self.rtol) + 1e-15
+        return self._lowest is self.identity
 
     def warning(self) -> str | None:
         """One line when the identity start stopped in a worse minimum than another

@@ -12,7 +12,7 @@ OUT/state, marked partial (metrics.json ``"partial": true``, ``"stopped_at_frame
 and the error is raised again; :func:`resume_run` continues a stopped or killed run and
 ends with the map an uninterrupted run makes, bit for bit
 (:mod:`torchratslam.experiments.run_state`). A new run refuses an OUT that holds a
-stopped run unless told to overwrite it. Files in OUT that torchratslam did not write
+run, stopped or finished, unless told to overwrite it. Files in OUT that torchratslam did not write
 (its manifest) are never replaced.
 """
 
@@ -49,6 +49,7 @@ from torchratslam.experiments.run_state import (
     STATE_DIR,
     RunRecord,
     SaveError,
+    finished_run,
     new_run_id,
     stopped_run,
     write_record,
@@ -282,6 +283,11 @@ def _start(
     status = {"wrote": False}
     try:
         if not resume and not settings.overwrite:
+            if finished_run(out):
+                raise InputError(
+                    f"{out} holds a finished run; choose another --out, or replace it with "
+                    "--overwrite"
+                )
             stopped = stopped_run(out)
             if stopped is not None:
                 raise InputError(

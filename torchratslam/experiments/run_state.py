@@ -28,6 +28,7 @@ __all__ = [
     "STATE_DIR",
     "RunRecord",
     "SaveError",
+    "finished_run",
     "json_default",
     "new_run_id",
     "read_record",
@@ -167,6 +168,15 @@ def save_run_state(slam: Any, out: Path, record: RunRecord, info: dict[str, Any]
         extra_files={HISTORY: _history_writer(slam)},
     )
     write_record(out, record)
+
+
+def finished_run(out: Path) -> bool:
+    """OUT holds a run that finished (its record says so)."""
+    try:
+        record = json.loads((out / RUN_RECORD).read_text())
+    except (OSError, ValueError):
+        return False
+    return isinstance(record, dict) and bool(record.get("finished"))
 
 
 def stopped_run(out: Path) -> str | None:

@@ -52,7 +52,7 @@ class TemplateBank(nn.Module):
         summaries: Callable[[torch.Tensor], Mapping[str, torch.Tensor | np.ndarray]] | None = None,
         summary_shapes: Mapping[str, tuple[int, ...]] | None = None,
         capacity: int = 64,
-        dtype: torch.dtype = torch.float32,
+        dtype: torch.dtype = torch.float64,
         device: torch.device | str | None = None,
     ) -> None:
         if y_size <= 0 or x_size <= 0:

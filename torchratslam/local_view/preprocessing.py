@@ -135,7 +135,7 @@ def preprocess(
     image: Any,
     params: LocalViewParams,
     *,
-    dtype: torch.dtype = torch.float32,
+    dtype: torch.dtype = torch.float64,
     device: torch.device | str | None = None,
 ) -> torch.Tensor:
     """Turn a camera image into a view template, as OpenRatSLAM does.

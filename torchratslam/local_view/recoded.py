@@ -29,7 +29,7 @@ class RecodedView(LocalView):
 
     Args:
         params: local view parameters.
-        dtype: template dtype (float32 or float64).
+        dtype: template dtype (float64, the default, as OpenRatSLAM's ``double``; or float32).
         device: template device.
     """
 
@@ -39,7 +39,7 @@ class RecodedView(LocalView):
         self,
         params: LocalViewParams,
         *,
-        dtype: torch.dtype = torch.float32,
+        dtype: torch.dtype = torch.float64,
         device: torch.device | str | None = None,
     ) -> None:
         super().__init__(params, dtype=dtype, device=device)

@@ -63,7 +63,7 @@ class TemplateView(nn.Module):
         self,
         params: LocalViewParams,
         *,
-        dtype: torch.dtype = torch.float32,
+        dtype: torch.dtype = torch.float64,
         device: torch.device | str | None = None,
         prune: bool = True,
         exact_errors: bool = False,

@@ -40,7 +40,7 @@ class LocalView(TemplateView):
 
     Args:
         params: local view parameters.
-        dtype: template dtype (float32 or float64).
+        dtype: template dtype (float64, the default, as OpenRatSLAM's ``double``; or float32).
         device: template device.
         prune: skip work with exact lower bounds (False: evaluate every pair; same result).
         exact_errors: report the exact best error of novel views too (slower); by
@@ -60,7 +60,7 @@ class LocalView(TemplateView):
         self,
         params: LocalViewParams,
         *,
-        dtype: torch.dtype = torch.float32,
+        dtype: torch.dtype = torch.float64,
         device: torch.device | str | None = None,
         prune: bool = True,
         exact_errors: bool = False,
@@ -134,7 +134,7 @@ class FeatureView(TemplateView):
         self,
         params: LocalViewParams,
         *,
-        dtype: torch.dtype = torch.float32,
+        dtype: torch.dtype = torch.float64,
         device: torch.device | str | None = None,
         key: str | None = None,
         scale: float = 1.0,

@@ -67,7 +67,9 @@ class RatSLAM:
         local_view, pose_cells, experience_map, odometry: a registered name, a class
             (called like the registry's factory) or a ready instance; None takes the
             name from the config's ``general`` section.
-        dtype, device: for the torch modules (local view, pose cells).
+        dtype: for the torch modules (local view, pose cells); None takes the config's
+            ``dtype`` key (float64 unless set: OpenRatSLAM's ``double``).
+        device: for the torch modules.
         pipelined: default mode of :meth:`run` (one worker thread per module).
 
     Attributes:
@@ -89,12 +91,14 @@ class RatSLAM:
         pose_cells: PoseCellModule | str | type | None = None,
         experience_map: ExperienceMapModule | str | type | None = None,
         odometry: OdometrySource | str | type | None = None,
-        dtype: torch.dtype = torch.float32,
+        dtype: torch.dtype | None = None,
         device: torch.device | str | None = None,
         pipelined: bool = False,
     ) -> None:
         self.config = config if config is not None else RatSLAMConfig()
         general = self.config.general
+        if dtype is None:
+            dtype = torch.float64 if general.dtype == "float64" else torch.float32
         self.dtype, self.device = dtype, device
         self.pipelined = pipelined
         self.local_view: LocalViewModule = LOCAL_VIEWS.build(

@@ -94,7 +94,7 @@ class PoseCellNetwork(nn.Module):
     Args:
         params: pose-cell parameters.
         batch_size: number of independent networks ``B``.
-        dtype: float32 (default) or float64.
+        dtype: float64 (default: OpenRatSLAM's ``double``) or float32.
         device: torch device.
         method: ``"auto"`` (default), ``"numpy"``, ``"crop"``, ``"separable"`` or
             ``"conv3d"`` (module docstring). ``"numpy"``, and ``"auto"`` unless
@@ -131,7 +131,7 @@ class PoseCellNetwork(nn.Module):
         params: PoseCellParams,
         batch_size: int = 1,
         *,
-        dtype: torch.dtype = torch.float32,
+        dtype: torch.dtype = torch.float64,
         device: Any = None,
         method: str = "auto",
         crop_fraction: float | None = None,

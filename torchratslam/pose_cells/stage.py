@@ -55,7 +55,7 @@ class PoseCells:
 
     Args:
         params: pose-cell parameters.
-        dtype: activity dtype (float32 default, float64 supported).
+        dtype: activity dtype (float64 default, as OpenRatSLAM's ``double``; float32 supported).
         device: torch device.
         method: dynamics method of the network (see :class:`PoseCellNetwork`).
     """
@@ -64,7 +64,7 @@ class PoseCells:
         self,
         params: PoseCellParams | None = None,
         *,
-        dtype: torch.dtype = torch.float32,
+        dtype: torch.dtype = torch.float64,
         device: Any = None,
         method: str = "auto",
     ) -> None:

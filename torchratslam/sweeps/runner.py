@@ -315,8 +315,6 @@ def run_group(runs: Sequence[RunSpec]) -> list[dict[str, Any]]:
     :class:`~torchratslam.pipeline.RatSLAM` (its own experience map). With
     ``skip_first_odometry`` no network steps at frame 0, as in a separate run.
     """
-    import torch
-
     from torchratslam.messages import Action
     from torchratslam.pipeline import RatSLAM
     from torchratslam.pose_cells.network import PoseCellNetwork
@@ -328,11 +326,13 @@ def run_group(runs: Sequence[RunSpec]) -> list[dict[str, Any]]:
     data = _open(runs[0])
     t0 = time.perf_counter()
     ref = RatSLAM(configs[0], odometry=_odometry_for(data, configs[0]))
-    modules = [PoseCells(c.pose_cells) for c in configs]
+    modules = [PoseCells(c.pose_cells, dtype=ref.dtype) for c in configs]
     slots: list[_SlotNetwork] = []
     shared = None
     if shares_network(modules[0].network, configs[0].pose_cells.pc_engine):
-        shared = PoseCellNetwork(configs[0].pose_cells, len(runs), method=modules[0].network.method)
+        shared = PoseCellNetwork(
+            configs[0].pose_cells, len(runs), dtype=ref.dtype, method=modules[0].network.method
+        )
         for b, m in enumerate(modules):
             slot = _SlotNetwork(shared, b, m.network.dims)
             m.network = slot  # type: ignore[assignment]  # the slot steps like a network
@@ -390,7 +390,6 @@ def run_group(runs: Sequence[RunSpec]) -> list[dict[str, Any]]:
             local_view=_ReplayView(views, sizes, templates),
             pose_cells=_ReplayPoseCells(actions[b], centres[b], angles[b], modules[b]),
             odometry=_ReplayOdometry(odos),  # type: ignore[arg-type]
-            dtype=torch.float32,
         )
         result = slam.run(frames, progress=False)
         own = time.perf_counter() - t1

@@ -98,11 +98,11 @@ class Progress:
 
 
 def _check_replaceable(table: Path, runs: list[RunSpec]) -> None:
-    """A table may be replaced without ``overwrite`` only when it holds this very sweep,
-    finished.
+    """A table is never replaced without ``overwrite``.
 
     Raises:
-        InputError: it holds a stopped sweep, another sweep's runs, or is no table.
+        InputError: always: it holds this sweep finished, a stopped sweep, another
+            sweep's runs, or is no table (each said, with what to do).
     """
     try:
         rows = read_table(table)
@@ -121,6 +121,10 @@ def _check_replaceable(table: Path, runs: list[RunSpec]) -> None:
             "sweep); continue it with --resume (resume=True), or start again with "
             "--overwrite (overwrite=True)"
         )
+    raise InputError(
+        f"{table} holds this sweep, finished; choose another out folder, or run it again "
+        "with --overwrite (overwrite=True)"
+    )
 
 
 def _spec(sweep_file: str | Path | SweepSpec | Mapping[str, Any]) -> SweepSpec:
@@ -195,7 +199,6 @@ def sweep(
         log.info("resuming: %d of %d runs already finished", len(rows), len(runs))
     elif table is not None and table.exists() and not overwrite:
         _check_replaceable(table, runs)
-        log.info("%s holds this sweep's finished runs; running them again", table)
     todo = [r for r in runs if r.run_id not in rows]
     own_executor = executor is None
     if executor is None:

@@ -220,6 +220,19 @@ def test_every_subcommand_help_has_examples_and_no_sphinx_markup():
                 assert action.help and "e.g." in action.help, (name, action.option_strings)
 
 
+@pytest.mark.parametrize("left", ["report.json", "seeds.json"])
+def test_multisession_refuses_an_out_holding_a_finished_run(tmp_path, capsys, left):
+    out = tmp_path / "ms"
+    out.mkdir()
+    (out / left).write_text("{}")
+    argv = ["multisession", "--tour", "sim:virtual_tour", "--out", str(out), "--max-frames", "5"]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert "holds a finished multisession run" in err and "--overwrite" in err
+    assert sorted(p.name for p in out.iterdir()) == [left]
+    assert (out / left).read_text() == "{}"
+
+
 def test_multisession_refuses_an_out_holding_a_run_that_did_not_finish(tmp_path, capsys):
     out = tmp_path / "ms"
     out.mkdir()

@@ -205,12 +205,13 @@ def test_files_the_project_did_not_write_are_never_replaced(setup, tmp_path, cap
     assert main([*_argv(cfg, data, out), "--max-frames", "3"]) == 2
     assert "did not write" in capsys.readouterr().err
     assert (out / "metrics.json").read_text() == "my notes"
-    # a second run over its own outputs is fine, and keeps the user's other files
+    # a second run over its own outputs (--overwrite: the first one finished) keeps the
+    # user's other files
     out2 = tmp_path / "out2"
     out2.mkdir()
     (out2 / "notes.txt").write_text("keep")
     assert main([*_argv(cfg, data, out2), "--max-frames", "3"]) == 0
-    assert main([*_argv(cfg, data, out2), "--max-frames", "4"]) == 0
+    assert main([*_argv(cfg, data, out2), "--max-frames", "4", "--overwrite"]) == 0
     assert (out2 / "notes.txt").read_text() == "keep"
 
 
@@ -361,6 +362,23 @@ def test_a_plain_re_run_refuses_an_out_holding_a_stopped_run(setup, tmp_path, ca
     _same_run(full, out)
     assert (out / "notes.txt").read_text() == "mine"
     assert main(["run", "--resume", str(out), "--overwrite"]) == 2  # not both
+
+
+def test_the_same_run_typed_twice_refuses_and_keeps_the_finished_run(setup, tmp_path, capsys):
+    """A finished run is never replaced by the same command typed again: one line naming
+    --overwrite, every file as it was; with --overwrite the same run again."""
+    _, cfg, data, full = setup
+    out = tmp_path / "out"
+    shutil.copytree(full, out)
+    before = {p: p.read_bytes() for p in out.rglob("*") if p.is_file() and p.name != LOCK}
+    capsys.readouterr()
+    assert main(_argv(cfg, data, out)) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert "holds a finished run" in err[0] and "--overwrite" in err[0]
+    after = {p: p.read_bytes() for p in out.rglob("*") if p.is_file() and p.name != LOCK}
+    assert after == before
+    assert main([*_argv(cfg, data, out), "--overwrite"]) == 0
+    _same_run(full, out)
 
 
 def test_run_help_says_what_run_does_and_shows_the_required_options(capsys):

@@ -99,7 +99,11 @@ def test_a_turned_map_gets_a_warning_and_the_best_start(lab_tour, tmp_path):
     ic = rep["icp"]
     assert ic["libicp_mse_m2"] > 10 * ic["libicp_best_mse_m2"]
     assert ic["libicp_best_mse_m2"] == pytest.approx(0.00883269, abs=5e-9)
-    assert ic["libicp_best_start_deg"] == pytest.approx(180)
+    # 180 and 270 degrees reach the same minimum (their last bits differ by CPU kernel):
+    # the rule picks the first start tried within 1% of the lowest residual
+    mses = {round(st["start_deg"]): st["mse_m2"] for st in ic["libicp_starts"]}
+    same = [a for a, m in mses.items() if m <= min(mses.values()) * 1.01 + 1e-15]
+    assert same[:2] == [180, 270] and ic["libicp_best_start_deg"] == pytest.approx(180)
     assert "local minimum" in ic["libicp_warning"] and not ic["libicp_starts_agree"]
     assert "warning: ICP from the identity" in summary_text(rep)
     out = write_json(rep, tmp_path / "sub" / "cmp.json")

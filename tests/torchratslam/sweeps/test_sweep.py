@@ -2,6 +2,7 @@
 local cluster; kill -9 then --resume; failed runs recorded; figures."""
 
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -187,10 +188,11 @@ def test_failed_run_is_recorded_and_the_sweep_goes_on(tmp_path):
     # resume keeps failed runs unless asked to retry them
     again = torchratslam.sweep(raw, tmp_path, resume=True, workers=1, progress=False, figures=False)
     assert len(again) == 4
-    # the finished sweep may run again; a stopped one (2 of 4 rows) or another sweep's
-    # table is refused unless resumed or overwritten
+    # the finished sweep, a stopped one (2 of 4 rows) or another sweep's table is refused
+    # unless resumed or overwritten
     kw = {"workers": 1, "progress": False, "figures": False}
-    assert len(torchratslam.sweep(raw, tmp_path, **kw)) == 4
+    with pytest.raises(InputError, match="holds this sweep, finished"):
+        torchratslam.sweep(raw, tmp_path, **kw)
     table = tmp_path / "results.csv"
     lines = table.read_text().splitlines(keepends=True)
     table.write_text("".join(lines[:3]))
@@ -202,3 +204,17 @@ def test_failed_run_is_recorded_and_the_sweep_goes_on(tmp_path):
         torchratslam.sweep(other, tmp_path, **kw)
     assert len(torchratslam.sweep(raw, tmp_path, overwrite=True, **kw)) == 4
     assert len(read_table(table)) == 4
+
+
+def test_a_finished_sweep_is_not_run_again_without_overwrite(sweep_file, reference, tmp_path):
+    """The same sweep command typed twice refuses in one line and changes nothing; with
+    --overwrite it runs again and writes the same table."""
+    ref_out, _ = reference
+    out = tmp_path / "twice"
+    shutil.copytree(ref_out, out)
+    before = {p.name: p.read_bytes() for p in out.rglob("*") if p.is_file()}
+    with pytest.raises(InputError, match=r"holds this sweep, finished.*--overwrite"):
+        torchratslam.sweep(sweep_file, out, workers=1, progress=False)
+    assert {p.name: p.read_bytes() for p in out.rglob("*") if p.is_file()} == before
+    torchratslam.sweep(sweep_file, out, workers=1, figures=False, overwrite=True, progress=False)
+    assert deterministic_text(out / "results.csv") == deterministic_text(ref_out / "results.csv")

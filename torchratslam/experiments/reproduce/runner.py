@@ -97,8 +97,16 @@ def run_all(
 
     An experiment that fails with a :class:`RatSLAMError` is recorded and the others go
     on; the caller decides the exit code from the outcomes.
+
+    Raises:
+        InputError: ``out`` holds a finished ``run_all`` (its index) and not ``overwrite``.
     """
     out = Path(out)
+    if (out / "index.json").exists() and not overwrite:
+        raise InputError(
+            f"{out} already holds the papers' reports (index.json); choose another --out or "
+            "pass --overwrite"
+        )
     outcomes: list[Outcome] = []
     for exp in all_experiments().values():
         t0 = time.perf_counter()

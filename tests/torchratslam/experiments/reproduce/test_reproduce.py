@@ -95,6 +95,17 @@ def test_run_all_records_failures_and_goes_on(tmp_path, fake_catalogue):
     assert "failed: no data for this one" in (tmp_path / "index.md").read_text()
 
 
+def test_a_second_reproduce_all_refuses_and_keeps_the_first(tmp_path, fake_catalogue, capsys):
+    assert main(["reproduce", "all", "--out", str(tmp_path), "--quick"]) == 1  # one fails
+    files = {p: p.read_bytes() for p in tmp_path.rglob("*") if p.is_file()}
+    capsys.readouterr()
+    assert main(["reproduce", "all", "--out", str(tmp_path), "--quick"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert "already holds" in err[0] and "--overwrite" in err[0] and "--debug" in err[-1]
+    assert {p: p.read_bytes() for p in tmp_path.rglob("*") if p.is_file()} == files
+    assert main(["reproduce", "all", "--out", str(tmp_path), "--quick", "--overwrite"]) == 1
+
+
 def test_the_command_lists_runs_and_fails_clearly(tmp_path, fake_catalogue, capsys):
     assert main(["reproduce", "--list"]) == 0
     assert capsys.readouterr().out.splitlines() == [
