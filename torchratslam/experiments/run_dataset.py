@@ -19,6 +19,7 @@ run, stopped or finished, unless told to overwrite it. Files in OUT that torchra
 from __future__ import annotations
 
 import dataclasses
+import logging
 import sys
 import time
 from pathlib import Path
@@ -57,6 +58,8 @@ from torchratslam.experiments.run_state import (
 from torchratslam.readers.limits import MAX_SPEED, MAX_TURN_RATE
 
 __all__ = ["DEFAULT_CHECKPOINT_EVERY", "bag_topics", "resume_run", "run_dataset"]
+
+log = logging.getLogger(__name__)
 
 DEFAULT_CHECKPOINT_EVERY = 1000
 """Frames between two checkpoints when the settings do not say (0 turns them off)."""
@@ -227,7 +230,15 @@ def resume_run(out: str | Path, settings: RunSettings | None = None) -> RunMetri
         frames = _finished_frames(out)
         raise InputError(f"--resume {out}: the run finished ({frames} frames); nothing to resume")
     opts = RunOptions.from_record(record["options"])
-    config = RatSLAMConfig.from_flat(record["config_flat"], source=str(out / RUN_RECORD))
+    flat = dict(record["config_flat"])
+    if "dtype" not in flat:  # recorded before the key existed, when float32 was the default
+        flat["dtype"] = "float32"
+        log.warning(
+            "%s: the run began before double precision became the default; it goes on in "
+            "float32, as it began",
+            out,
+        )
+    config = RatSLAMConfig.from_flat(flat, source=str(out / RUN_RECORD))
     run_id = str(record.get("run_id") or "")
     return _start(opts, config, out, settings, run_id=run_id, resume=True)
 

@@ -335,6 +335,26 @@ def test_a_run_killed_during_a_checkpoint_resumes_to_the_uninterrupted_map(setup
     _same_run(full, out)
 
 
+def test_a_run_stopped_before_double_became_the_default_resumes_as_it_began(setup, tmp_path):
+    """A record without the ``dtype`` key was written when float32 was the default: it
+    resumes in float32, to the map an uninterrupted float32 run makes, bit for bit."""
+    _, cfg, data, _ = setup
+    full32 = tmp_path / "full32"
+    assert main([*_argv(cfg, data, full32), "--set", "dtype=float32"]) == 0
+    ds = _copy_data(data, tmp_path / "ds")
+    good = (ds / "frames" / "000025.png").read_bytes()
+    (ds / "frames" / "000025.png").write_bytes(b"not a png")
+    out = tmp_path / "out"
+    assert main([*_argv(cfg, ds, out), "--set", "dtype=float32"]) == 2
+    record = json.loads((out / "run.json").read_text())
+    del record["config_flat"]["dtype"]
+    (out / "run.json").write_text(json.dumps(record))
+    (ds / "frames" / "000025.png").write_bytes(good)
+    assert main(["run", "--resume", str(out), "--no-progress"]) == 0
+    _same_run(full32, out)
+    assert load_state(out).activity.dtype == np.float32  # float32 throughout
+
+
 def test_a_plain_re_run_refuses_an_out_holding_a_stopped_run(setup, tmp_path, capsys):
     """Re-running the command of a stopped run refuses in one line and points to
     --resume; --overwrite starts again, replacing only torchratslam's own files."""
