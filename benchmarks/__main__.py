@@ -1,7 +1,7 @@
 """``make bench``: the speed report side by side with OpenRatSLAM's C++, or other benchmarks.
 
 Usage:
-    python -m benchmarks                 the speed report (``benchmarks/speed.py``): three
+    python -m benchmarks                 the speed report (``benchmarks/speed.py``): four
                                          sequences, per stage, peak memory, import cost,
                                          the long-run configuration (about 10 minutes on
                                          a quiet 2-core machine)
@@ -76,7 +76,9 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--rounds", type=int, default=None, help="alternated rounds on the loops")
     ap.add_argument("--out", type=Path, default=None, help="datasets and runs (out/bench)")
     ap.add_argument(
-        "--sequences", default="loop,loop30,suburb", help="some of loop, loop30, suburb"
+        "--sequences",
+        default="loop,loop30,heldout,suburb",
+        help="some of loop, loop30, heldout, suburb",
     )
     ap.add_argument("--suburb-frames", type=int, default=None, help="default 20000 (quick 2000)")
     what = ap.add_mutually_exclusive_group()

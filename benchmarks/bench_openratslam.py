@@ -6,7 +6,8 @@ rendered once into a temporary dataset folder; then runs alternate: OpenRatSLAM'
 (``ratslam_driver``: its three classes, unmodified, ``-O3``, driven synchronously as its
 ROS nodes drive them, images decoded before the loop), torchratslam with
 ``behaviour: openratslam``, torchratslam with ``behaviour: torchratslam`` (one thread,
-float32, frames decoded before the loop), and again, ``BENCH_PAIRS`` times (default 3).
+the default precision: double, frames decoded before the loop), and again,
+``BENCH_PAIRS`` times (default 3).
 Per-frame times are each run's mean of the per-module times (local view + pose cells +
 experience map; torchratslam also times its odometry source); a speed ratio is C++
 ms/frame over torchratslam ms/frame of the same round, and the table gives the median of
@@ -99,7 +100,7 @@ def _one_set(build: Path, ds, tmp: Path, rounds: int, quick: bool) -> None:
     ref = RatSLAM(load_config(cfg, behaviour="openratslam"), dtype=torch.float64)
     ref.run(frames, progress=False, callback=lambda r: acts.append(int(r.action.kind)))
     acts32: list[int] = []
-    s32 = RatSLAM(load_config(cfg, behaviour="openratslam"))
+    s32 = RatSLAM(load_config(cfg, behaviour="openratslam"), dtype=torch.float32)
     s32.run(frames, progress=False, callback=lambda r: acts32.append(int(r.action.kind)))
 
     def med(runs: list[dict], key: str) -> float:

@@ -216,16 +216,20 @@ def load_frames(data: Path) -> list:
     return list(open_data(str(data)).frames())
 
 
-def run_py(config: Path, frames: list, behaviour: str, dtype: str = "float32") -> dict:
+def run_py(config: Path, frames: list, behaviour: str, dtype: str | None = None) -> dict:
     """torchratslam's pipeline on decoded frames (one thread); per-frame module times,
-    the loop's wall time and its process CPU time."""
+    the loop's wall time and its process CPU time. ``dtype`` None: the config's (double,
+    OpenRatSLAM's, unless the config says otherwise)."""
     import torch
 
     from torchratslam.config import load_config
     from torchratslam.pipeline import RatSLAM
 
     torch.set_num_threads(1)
-    slam = RatSLAM(load_config(config, behaviour=behaviour), dtype=getattr(torch, dtype))
+    slam = RatSLAM(
+        load_config(config, behaviour=behaviour),
+        dtype=None if dtype is None else getattr(torch, dtype),
+    )
     t0, c0 = time.perf_counter(), time.process_time()
     res = slam.run(frames, progress=False)
     wall, cpu = time.perf_counter() - t0, time.process_time() - c0

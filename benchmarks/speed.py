@@ -1,18 +1,23 @@
 """The speed report of ``make bench``: torchratslam side by side with OpenRatSLAM's C++.
 
-Three simulated sequences, each rendered once into a dataset folder under ``OUT`` (default
+Five simulated sequences, each rendered once into a dataset folder under ``OUT`` (default
 ``out/bench``, reused by later runs) and run by both systems on the same frames:
 
 * ``loop``: the corridor loop, 6 laps (``sim:loop``, 1781 panoramic 256x64 frames, seed 0),
   with the OpenRatSLAM comparison's config (about 270 templates);
 * ``loop, 30 laps``: the same loop driven 30 times (``sim:loop?laps=30``, 8901 frames);
+* ``held-out``: two loops nothing in the project was run or tuned on before the default
+  became double (other seeds, lengths and frame rates: ``sim:loop?seed=23&laps=3&hz=4``,
+  ``sim:loop?seed=31&laps=12&hz=6``), to show the default's map is the C++'s on data it
+  never saw;
 * ``suburb``: the city-scale street grid (``sim:suburb?frames=20000``, 20000 forward
   128x64 frames, about 16000 experiences) with the config ``torchratslam simulate``
   writes beside it.
 
 On the loops the runs alternate in one process: OpenRatSLAM's C++ (``ratslam_driver``,
 images decoded before its loop), then torchratslam's default profile (one torch thread,
-float32, frames decoded before the loop), ``rounds`` times; the speed ratio is C++
+the default precision: double, as the C++; frames decoded before the loop), ``rounds``
+times; the speed ratio is C++
 ms/frame over torchratslam ms/frame of the same round, and the table gives the median of
 the per-round ratios. Milliseconds per frame are module time (local view + pose cells +
 experience map, torchratslam's odometry source included); "loop wall" is the whole frame
@@ -55,6 +60,9 @@ from benchmarks.openratslam import (
     write_dataset_dir,
 )
 
+HELD_OUT = ("sim:loop?seed=23&laps=3&hz=4", "sim:loop?seed=31&laps=12&hz=6")
+"""Loops first run when the default became double (seeds, lengths and rates never used)."""
+
 LONG_RUN = ("behaviour=openratslam", "exp_relax_budget=20000", "exp_correction=0.95")
 """The long-run configuration on the suburb (``bench_scale``'s recommendation)."""
 
@@ -76,7 +84,7 @@ class Plan:
     out: Path
 
 
-SEQUENCES = ("loop", "loop30", "suburb")
+SEQUENCES = ("loop", "loop30", "heldout", "suburb")
 """Names of the report's sequences (``--sequences``)."""
 
 
@@ -90,11 +98,13 @@ def plan(
     """The full report (three sequences, 3 rounds) or the quick check (fewer frames, 1
     round); ``sequences`` picks some of :data:`SEQUENCES`."""
     cfg = LOOP_TXT.format(threshold=0.06)
-    loops: tuple[Dataset, ...] = (
-        Dataset("loop", "sim:loop", cfg, 400 if quick else None, "corridor loop, 6 laps"),
-        Dataset("loop, 30 laps", "sim:loop?laps=30", cfg, 1200 if quick else None, "30 laps"),
+    keyed = (
+        ("loop", Dataset("loop", "sim:loop", cfg, 400 if quick else None, "6 laps")),
+        ("loop30", Dataset("loop, 30 laps", "sim:loop?laps=30", cfg, 1200 if quick else None, "")),
+        ("heldout", Dataset("held-out loop A", HELD_OUT[0], cfg, 600 if quick else None, "")),
+        ("heldout", Dataset("held-out loop B", HELD_OUT[1], cfg, 600 if quick else None, "")),
     )
-    loops = tuple(d for d, k in zip(loops, SEQUENCES) if k in sequences)
+    loops = tuple(d for k, d in keyed if k in sequences)
     if suburb_frames is None:
         suburb_frames = 2000 if quick else 20000
     return Plan(
@@ -127,13 +137,9 @@ def loop_side_by_side(build: Path, ds: Dataset, root: Path, rounds: int) -> dict
         for i in range(rounds):
             cpp_runs.append(run_cpp(build, data, Path(tmp) / f"cpp{i}"))
             py_runs.append(run_py(cfg, frames, "openratslam"))
-        ex = read_csv(Path(tmp) / "cpp0" / "experiences.csv")
-    slam = py_runs[0].pop("slam")
-    for r in py_runs[1:]:
+        same_map = compare_maps(Path(tmp) / "cpp0", data, py_runs[0]["slam"])
+    for r in py_runs:
         r.pop("slam")
-    poses = np.asarray(slam.experience_map.poses)
-    same = len(poses) == len(ex["x"])
-    pose_err = float(np.hypot(poses[:, 0] - ex["x"], poses[:, 1] - ex["y"]).max()) if same else None
     return {
         "name": ds.name,
         "spec": ds.spec,
@@ -142,8 +148,45 @@ def loop_side_by_side(build: Path, ds: Dataset, root: Path, rounds: int) -> dict
         "py": py_runs,
         "ratios": [c["total_ms_mean"] / p["total"] for c, p in zip(cpp_runs, py_runs)],
         "cpu_ratios": [c["loop_cpu_s"] / p["cpu_s"] for c, p in zip(cpp_runs, py_runs)],
-        "pose_err_m": pose_err,
+        "same_map": same_map,
     }
+
+
+def compare_maps(cpp: Path, data: Path, slam: Any) -> dict[str, Any]:
+    """torchratslam's map against the C++'s run in ``cpp``: experience and link counts,
+    the largest distance between their final poses, and each ATE (the same code for both,
+    frames >= 1 against ``data``'s ground truth); ``same`` when the counts are equal, the
+    poses within 1e-9 m and the ATEs within 1e-9 m."""
+    from benchmarks.bench_openratslam import _ate_cpp, _ate_py
+
+    ex = read_csv(cpp / "experiences.csv")
+    links = read_csv(cpp / "links.csv")
+    g = read_csv(data / "groundtruth.csv")
+    gt = np.stack([g["x"], g["y"]], 1)
+    poses = np.asarray(slam.experience_map.poses)
+    counts = (len(ex["x"]), len(links[next(iter(links))]), len(poses), int(slam.counts()[2]))
+    err = None
+    if counts[0] == counts[2]:
+        err = float(np.hypot(poses[:, 0] - ex["x"], poses[:, 1] - ex["y"]).max(initial=0.0))
+    ate = (_ate_cpp(cpp, gt), _ate_py(slam, gt))
+    same = (
+        counts[0] == counts[2]
+        and counts[1] == counts[3]
+        and err is not None
+        and err < 1e-9
+        and abs(ate[0] - ate[1]) < 1e-9
+    )
+    return {"counts": counts, "pose_err_m": err, "ate": ate, "same": same}
+
+
+def same_map_text(m: dict[str, Any]) -> str:
+    """The "same map as the C++" cell: yes/no, counts, poses, ATEs."""
+    ce, cl, pe, pl = m["counts"]
+    poses = "-" if m["pose_err_m"] is None else f"{m['pose_err_m']:.0e} m"
+    return (
+        f"{'**yes**' if m['same'] else '**no**'}: experiences {pe}/{ce}, links {pl}/{cl}, "
+        f"final poses within {poses}, ATE {m['ate'][1]:.6f} / {m['ate'][0]:.6f} m"
+    )
 
 
 def _med(runs: list[dict], key: str) -> float:
@@ -291,10 +334,11 @@ def print_loops(results: list[dict[str, Any]]) -> None:
     print("### Speed: both systems on the same frames\n")
     print(
         "| sequence | frames | templates / experiences / links (C++; torchratslam) | "
+        "same map as the C++ (torchratslam / C++) | "
         "C++ ms/frame | torchratslam ms/frame | **ratio C++ / torchratslam** | per round | "
         "ratio of loop CPU times |"
     )
-    print("|---|---|---|---|---|---|---|---|")
+    print("|---|---|---|---|---|---|---|---|---|")
     for r in results:
         c, p = r["cpp"][0], r["py"][0]
         counts = (
@@ -303,15 +347,12 @@ def print_loops(results: list[dict[str, Any]]) -> None:
         )
         print(
             f"| {r['name']} (`{r['spec']}`) | {r['frames']} | {counts} | "
+            f"{same_map_text(r['same_map'])} | "
             f"{_med(r['cpp'], 'total_ms_mean'):.3f} | {_med(r['py'], 'total'):.3f} | "
             f"**{np.median(r['ratios']):.2f}x** | {', '.join(f'{x:.2f}' for x in r['ratios'])} | "
             f"{np.median(r['cpu_ratios']):.2f}x |"
         )
-    for r in results:
-        err = r["pose_err_m"]
-        same = "not the same size" if err is None else f"final poses within {err:.1e} m"
-        print(f"\n{r['name']}: torchratslam's map against the C++'s: {same}.", end="")
-    print("\n\n### Per stage (ms/frame, median of rounds)\n")
+    print("\n### Per stage (ms/frame, median of rounds)\n")
     print("| sequence | stage | C++ | torchratslam | C++ / torchratslam |")
     print("|---|---|---|---|---|")
     for r in results:
