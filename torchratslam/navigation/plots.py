@@ -33,13 +33,17 @@ def _floor(ax: plt.Axes, office: Office) -> None:
     )  # fmt: skip
 
 
-def plot_pc_path(pc: np.ndarray, dim_xy: int, title: str, path: Path) -> None:
+def plot_pc_path(pc: np.ndarray, dims: int | tuple[int, int], title: str, path: Path) -> None:
     """The packet's ``(x', y')`` path; steps over 2 cells are drawn dashed.
+
+    Args:
+        dims: the matrix's ``(X, Y)`` cells (one number: square).
 
     Shape:
         pc: (F, 3) cells.
     """
-    fig, ax = plt.subplots(figsize=(5, 5))
+    n_x, n_y = (dims, dims) if isinstance(dims, int) else dims
+    fig, ax = plt.subplots(figsize=(5, max(2.5, 5 * n_y / n_x)) if n_x >= n_y else (5, 5))
     xy = np.asarray(pc, np.float64)[:, :2]
     jump = np.hypot(*np.diff(xy, axis=0).T) > 2.0
     cuts = np.flatnonzero(jump) + 1
@@ -50,9 +54,8 @@ def plot_pc_path(pc: np.ndarray, dim_xy: int, title: str, path: Path) -> None:
     ax.plot([], [], "r--", label=f"jumps ({len(cuts)})")
     ax.plot(*xy[0], "go", label="start")
     ax.plot(*xy[-1], "ks", label="end")
-    ax.set(
-        xlim=(0, dim_xy), ylim=(0, dim_xy), xlabel="x' (cells)", ylabel="y' (cells)", title=title
-    )
+    ax.set(xlim=(0, n_x), ylim=(0, n_y), xlabel="x' (cells)", ylabel="y' (cells)", title=title)
+    ax.set_aspect("equal")
     ax.legend(loc="upper right", fontsize=7)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
