@@ -20,7 +20,13 @@ import numpy as np
 from ratslam_graph.experience_map import ExperienceMap
 from torchratslam.sim.office.builder import Office
 
-__all__ = ["plot_experience_map", "plot_pc_path", "plot_temporal_map", "plot_trial_on_floor"]
+__all__ = [
+    "plot_experience_map",
+    "plot_goal_memory",
+    "plot_pc_path",
+    "plot_temporal_map",
+    "plot_trial_on_floor",
+]
 
 
 def _floor(ax: plt.Axes, office: Office) -> None:
@@ -128,6 +134,25 @@ def plot_trial_on_floor(
         ax.add_patch(plt.Rectangle((cx - w / 2, cy - h / 2), w, h, color="k", label="obstacle"))
     ax.set(xlabel="x (m)", ylabel="y (m)", title=title, aspect="equal")
     ax.legend(loc="upper right", fontsize=6)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def plot_goal_memory(times: np.ndarray, dims: tuple[int, int], title: str, path: Path) -> None:
+    """Goal memory's temporal map over the ``(x', y')`` cells (Fig. 4); cells it cannot
+    reach are left blank.
+
+    Shape:
+        times: (X * Y,) seconds, cell ``x + X y``.
+    """
+    n_x, n_y = dims
+    grid = np.asarray(times, np.float64).reshape(n_y, n_x)
+    grid = np.where(np.isfinite(grid), grid, np.nan)
+    fig, ax = plt.subplots(figsize=(5, max(2.5, 5 * n_y / n_x)))
+    im = ax.imshow(grid, origin="lower", cmap="viridis", extent=(0, n_x, 0, n_y))
+    fig.colorbar(im, ax=ax, label="time to the goal (s)", shrink=0.8)
+    ax.set(xlabel="x' (cells)", ylabel="y' (cells)", title=title)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
