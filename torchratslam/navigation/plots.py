@@ -139,9 +139,11 @@ def plot_trial_on_floor(
     plt.close(fig)
 
 
-def plot_goal_memory(times: np.ndarray, dims: tuple[int, int], title: str, path: Path) -> None:
+def plot_goal_memory(
+    times: np.ndarray, dims: tuple[int, int], title: str, path: Path, label: str = "time (s)"
+) -> None:
     """Goal memory's temporal map over the ``(x', y')`` cells (Fig. 4); cells it cannot
-    reach are left blank.
+    reach are left blank; ``label`` names the colour scale.
 
     Shape:
         times: (X * Y,) seconds, cell ``x + X y``.
@@ -151,7 +153,7 @@ def plot_goal_memory(times: np.ndarray, dims: tuple[int, int], title: str, path:
     grid = np.where(np.isfinite(grid), grid, np.nan)
     fig, ax = plt.subplots(figsize=(5, max(2.5, 5 * n_y / n_x)))
     im = ax.imshow(grid, origin="lower", cmap="viridis", extent=(0, n_x, 0, n_y))
-    fig.colorbar(im, ax=ax, label="time to the goal (s)", shrink=0.8)
+    fig.colorbar(im, ax=ax, label=label, shrink=0.8)
     ax.set(xlabel="x' (cells)", ylabel="y' (cells)", title=title)
     fig.tight_layout()
     fig.savefig(path, dpi=110)

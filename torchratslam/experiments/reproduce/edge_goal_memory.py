@@ -104,6 +104,7 @@ def _goal_memory(ctx: ExperimentContext) -> Report:
             dims,
             f"Goal memory's temporal map from the start, {dims[0]}x{dims[1]}x36",
             ctx.out / f"fig4_goal_memory_{tag}.png",
+            "time from the start's cell (s)",
         )
         figures += [f"fig3_pc_path_{tag}.png", f"fig4_goal_memory_{tag}.png"]
         gm_results = [agent.navigate(g) for g in goals]
