@@ -109,7 +109,9 @@ class PoseCellParams(Params):
 
     section: ClassVar[str] = "pose cell"
 
-    pc_dim_xy: int = param(21, "cells along x and y", gt=0)
+    pc_dim_xy: int = param(21, "cells along x and y (unless pc_dim_x / pc_dim_y say)", gt=0)
+    pc_dim_x: int = param(0, "cells along x (0: pc_dim_xy)", ge=0)
+    pc_dim_y: int = param(0, "cells along y (0: pc_dim_xy)", ge=0)
     pc_dim_th: int = param(36, "cells along theta", gt=0)
     pc_w_e_dim: int = param(7, "excitatory kernel side (cells)", gt=0)
     pc_w_e_var: float = param(1.0, "excitatory kernel variance", gt=0.0)
@@ -163,8 +165,35 @@ class PoseCellParams(Params):
         choices=("auto", "numpy", "torch"),
     )
 
+    @property
+    def dim_x(self) -> int:
+        """Cells along x: ``pc_dim_x``, or ``pc_dim_xy`` when it is 0."""
+        return self.pc_dim_x or self.pc_dim_xy
+
+    @property
+    def dim_y(self) -> int:
+        """Cells along y: ``pc_dim_y``, or ``pc_dim_xy`` when it is 0."""
+        return self.pc_dim_y or self.pc_dim_xy
+
+    @property
+    def dims(self) -> tuple[int, int, int]:
+        """``(X, Y, TH)``: the ring sizes of the network."""
+        return self.dim_x, self.dim_y, self.pc_dim_th
+
     def __post_init__(self) -> None:
         super().__post_init__()
+        default_xy = type(self).__dataclass_fields__["pc_dim_xy"].default
+        if (
+            self.pc_dim_x
+            and self.pc_dim_y
+            and self.pc_dim_xy != default_xy
+            and self.pc_dim_xy not in (self.pc_dim_x, self.pc_dim_y)
+        ):
+            raise ConfigError(
+                f"pc_dim_xy = {self.pc_dim_xy} contradicts pc_dim_x = {self.pc_dim_x} and "
+                f"pc_dim_y = {self.pc_dim_y} (it would size neither axis): drop pc_dim_xy or "
+                "make it one of them"
+            )
         if self.pc_wrap == "openratslam" and self.pc_multi_cell:
             raise ConfigError(
                 "pc_wrap='openratslam' (the reference's edge loss) is defined for one-cell "
@@ -343,9 +372,12 @@ class RatSLAMConfig:
         Changing ``behaviour`` sets the new profile's keys too, except those given in
         ``changes`` and those whose current value differs from the old profile's (keys
         the config set itself; a key set to the old profile's own value follows the new
-        profile).
+        profile). Setting both ``pc_dim_x`` and ``pc_dim_y`` (and not ``pc_dim_xy``)
+        returns ``pc_dim_xy`` to its default, which then sizes neither axis.
         """
         flat = self.to_flat()
+        if changes.get("pc_dim_x") and changes.get("pc_dim_y") and "pc_dim_xy" not in changes:
+            flat.pop("pc_dim_xy")  # both axes are sized now: the old square size goes
         if "behaviour" in changes:
             old = profile_values(flat["behaviour"], "replace()")
             flat = {k: v for k, v in flat.items() if k not in old or v != old[k]}
@@ -557,7 +589,7 @@ def check_config_limits(config: RatSLAMConfig, *, memory_bytes: int | None = Non
     """Checks against the machine, made before any work (the checks across fields run
     when the config is made):
 
-    * the pose-cell network (``pc_dim_xy**2 * pc_dim_th`` cells, a few float copies)
+    * the pose-cell network (``X * Y * pc_dim_th`` cells, a few float copies)
       and one template (``template_x_size * template_y_size``) fit in ``memory_bytes``
       (default: the machine's physical memory).
 
@@ -567,12 +599,14 @@ def check_config_limits(config: RatSLAMConfig, *, memory_bytes: int | None = Non
     flat = config.to_flat()
     if memory_bytes is None:
         memory_bytes = _physical_memory()
-    xy, th = int(flat["pc_dim_xy"]), int(flat["pc_dim_th"])
-    need = xy * xy * th * 8 * 4  # activity + excitation/inhibition buffers, float64 worst case
+    n_x, n_y, th = config.pose_cells.dims
+    need = n_x * n_y * th * 8 * 4  # activity + excitation/inhibition buffers, float64 worst
     if memory_bytes and need > memory_bytes:
+        size = f"pc_dim_xy = {n_x}" if n_x == n_y else f"pc_dim_x = {n_x}, pc_dim_y = {n_y}"
+        keys = "pc_dim_xy" if n_x == n_y else "pc_dim_x / pc_dim_y"
         raise ConfigError(
-            f"pc_dim_xy = {xy}, pc_dim_th = {th}: the pose-cell network needs about "
-            f"{_size(need)}, more than this machine's {_size(memory_bytes)}; lower pc_dim_xy"
+            f"{size}, pc_dim_th = {th}: the pose-cell network needs about "
+            f"{_size(need)}, more than this machine's {_size(memory_bytes)}; lower {keys}"
         )
     tx, ty = int(flat["template_x_size"]), int(flat["template_y_size"])
     one = tx * ty * 8 * 4  # one template and the working copies of a comparison

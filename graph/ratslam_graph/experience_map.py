@@ -425,7 +425,7 @@ class ExperienceMap:
         pc: tuple[float, float, float] | np.ndarray,
         template_id: int,
         *,
-        dims: tuple[float, float] | None = None,
+        dims: tuple[float, ...] | None = None,
         relative_rad: float = 0.0,
     ) -> Action:
         """The action of ``exp_create_rule="activity"`` (Eqs. 1-4 of the experience-map paper).
@@ -440,8 +440,8 @@ class ExperienceMap:
         Args:
             pc: pose-cell coordinates of the dominant packet (cells).
             template_id: the current view template.
-            dims: ``(pc_dim_xy, pc_dim_th)``: distances the short way round the wrapping
-                network (None: plain differences).
+            dims: ``(X, Y, TH)`` (or ``(XY, TH)``, a square network): distances the
+                short way round the wrapping network (None: plain differences).
             relative_rad: the relative view angle the action carries.
         """
         a = queries.activity(self.view(), pc, template_id, dims=dims)

@@ -46,7 +46,7 @@ def experience_activity(
     *,
     zone_xy: float,
     zone_th: float,
-    dims: tuple[float, float] | None = None,
+    dims: tuple[float, ...] | None = None,
 ) -> np.ndarray:
     """Activity of every experience (Eqs. 1-4 of the experience-map paper).
 
@@ -61,8 +61,9 @@ def experience_activity(
         vt_current: the current template id.
         zone_xy: ``r_a``, the zone constant in the ``(x', y')`` plane (cells).
         zone_th: ``th_a``, the zone constant along ``th'`` (cells).
-        dims: ``(pc_dim_xy, pc_dim_th)`` to measure differences the short way round the
-            wrapping pose-cell network; None measures them plainly, as Eqs. 1-2 print.
+        dims: ``(X, Y, TH)`` (or ``(XY, TH)``, a square network) to measure differences
+            the short way round the wrapping pose-cell network; None measures them
+            plainly, as Eqs. 1-2 print.
 
     Shape:
         pc_experiences: (N, 3); vt_experiences: (N,); pc_current: (3,). Returns (N,),
@@ -75,11 +76,14 @@ def experience_activity(
         raise InputError(f"{len(pc)} experience pose-cell coordinates but {len(vt)} template ids")
     if zone_xy <= 0 or zone_th <= 0:
         raise InputError(f"zone constants must be > 0, got r_a={zone_xy}, th_a={zone_th}")
-    dxy, dth = (None, None) if dims is None else dims
-    r = (
-        np.hypot(ring_distance(cur[0], pc[:, 0], dxy), ring_distance(cur[1], pc[:, 1], dxy))
-        / zone_xy
-    )
+    if dims is None:
+        dx = dy = dth = None
+    elif len(dims) == 2:
+        dx, dth = dims
+        dy = dx
+    else:
+        dx, dy, dth = dims
+    r = np.hypot(ring_distance(cur[0], pc[:, 0], dx), ring_distance(cur[1], pc[:, 1], dy)) / zone_xy
     t = ring_distance(cur[2], pc[:, 2], dth) / zone_th
     e = np.where((r > 1.0) | (t > 1.0), 0.0, 2.0 - r - t)  # Eq. 3
     return np.where(vt == vt_current, e, 0.0)  # Eq. 4

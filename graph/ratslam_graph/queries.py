@@ -89,7 +89,7 @@ def activity(
     pc: tuple[float, float, float] | np.ndarray,
     template_id: int,
     *,
-    dims: tuple[float, float] | None = None,
+    dims: tuple[float, ...] | None = None,
 ) -> np.ndarray:
     """Experience activity (Eqs. 1-4) with the map's zone constants.
 
@@ -97,8 +97,9 @@ def activity(
         view: the map.
         pc: pose-cell coordinates of the dominant packet (cells).
         template_id: the current template.
-        dims: ``(pc_dim_xy, pc_dim_th)`` to measure pose-cell distances around the
-            wrapping network; None: plain differences as the paper prints them.
+        dims: ``(X, Y, TH)`` (or ``(XY, TH)``, a square network) to measure pose-cell
+            distances around the wrapping network; None: plain differences as the
+            paper prints them.
 
     Shape:
         pc: (3,). Returns (N,).
@@ -119,7 +120,7 @@ def peak_experience(
     pc: tuple[float, float, float] | np.ndarray,
     template_id: int,
     *,
-    dims: tuple[float, float] | None = None,
+    dims: tuple[float, ...] | None = None,
 ) -> tuple[int, float]:
     """The most active experience and its activity (``(-1, 0.0)`` if none is active)."""
     return features.peak_experience(activity(view, pc, template_id, dims=dims))

@@ -434,3 +434,28 @@ def test_map_temporal_map_and_routes():
     assert np.isinf(queries.temporal_map(em.view())[iso])
     with pytest.raises(InputError):
         queries.temporal_map(em.view(), method="astar")
+
+
+def test_activity_measures_each_axis_on_its_own_ring():
+    """dims (X, Y, TH): an experience across the y wrap of a 40-cell ring is near, the
+    same offset in x (ring of 100) is not a wrap; (XY, TH) is the square special case."""
+    pcs = np.array([[50.0, 39.5, 3.0], [99.5, 20.0, 3.0], [50.0, 20.0, 35.5]])
+    cur = np.array([50.0, 0.5, 3.0])
+    got = experience_activity(
+        pcs, np.zeros(3), cur, 0, zone_xy=5.0, zone_th=4.0, dims=(100, 40, 36)
+    )
+    for i, p in enumerate(pcs):
+        gaps = [
+            min(abs(p[a] - cur[a]) % n, n - abs(p[a] - cur[a]) % n)
+            for a, n in enumerate((100, 40, 36))
+        ]
+        r, t = math.hypot(gaps[0], gaps[1]) / 5.0, gaps[2] / 4.0
+        assert got[i] == pytest.approx(0.0 if r > 1 or t > 1 else 2 - r - t)
+    assert got[0] == pytest.approx(2 - 1 / 5)
+    square = experience_activity(pcs, np.zeros(3), cur, 0, zone_xy=5.0, zone_th=4.0, dims=(100, 36))
+    assert np.array_equal(
+        square,
+        experience_activity(
+            pcs, np.zeros(3), cur, 0, zone_xy=5.0, zone_th=4.0, dims=(100, 100, 36)
+        ),
+    )

@@ -57,6 +57,12 @@ def test_a_bad_set_value_is_blamed_on_set_not_on_the_file(tmp_path):
 def test_sizes_that_cannot_fit_and_crossed_crops_are_refused_before_the_work():
     with pytest.raises(ConfigError, match=r"pc_dim_xy = 100000.*needs about .*TB"):
         check_config_limits(load_config(None, pc_dim_xy=100000))
+    # a rectangle is counted as X x Y cells, named by its own keys
+    with pytest.raises(
+        ConfigError, match=r"pc_dim_x = 2000000, pc_dim_y = 40.*lower pc_dim_x / pc_dim_y"
+    ):
+        check_config_limits(load_config(None, pc_dim_x=2_000_000, pc_dim_y=40), memory_bytes=10**9)
+    check_config_limits(load_config(None, pc_dim_x=100, pc_dim_y=40), memory_bytes=10**9)
     check_config_limits(load_config("virtual_tour"))
     with pytest.raises(ConfigError, match="one template needs about"):
         check_config_limits(load_config(None, template_x_size=10**6, template_y_size=10**6))

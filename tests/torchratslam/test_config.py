@@ -101,8 +101,8 @@ def test_txt_equals_yaml_for_the_same_values(tmp_path: Path):
 
 def test_unknown_key_names_key_and_nearest(tmp_path: Path):
     p = tmp_path / "bad.yaml"
-    p.write_text("pc_dim_xz: 21\n")
-    with pytest.raises(ConfigError, match=r"'pc_dim_xz'.*did you mean 'pc_dim_xy'"):
+    p.write_text("pc_dim_xyz: 21\n")
+    with pytest.raises(ConfigError, match=r"'pc_dim_xyz'.*did you mean 'pc_dim_xy'"):
         load_config(p)
     t = tmp_path / "bad.txt"
     t.write_text("[ratslam]\nvt_match_treshold=0.1\n")

@@ -16,7 +16,7 @@ from __future__ import annotations
 from typing import Any
 
 from torchratslam.errors import MapFormatError
-from torchratslam.maps.state import MISSING_KEY, MapState
+from torchratslam.maps.state import MISSING_KEY, MapState, config_pc_dims
 
 __all__ = ["check_compatible", "conform", "require_templates"]
 
@@ -34,7 +34,17 @@ def check_compatible(state: MapState, config: Any, *, what: str = "stored map") 
     """
     flat = config.to_flat() if hasattr(config, "to_flat") else dict(config)
     problems = []
-    for key in ("pc_dim_xy", "pc_dim_th", "template_x_size", "template_y_size"):
+    sides = (state.config, flat)
+    square = not any(c.get(k) for c in sides for k in ("pc_dim_x", "pc_dim_y"))
+    if not square and all("pc_dim_xy" in c for c in sides):
+        mine_d, theirs_d = config_pc_dims(state.config)[:2], config_pc_dims(flat)[:2]
+        if mine_d != theirs_d:
+            problems.append(
+                f"the pose cells' (X, Y) = {mine_d} in the map but {theirs_d} in the "
+                "config (pc_dim_x / pc_dim_y, else pc_dim_xy)"
+            )
+    keys = ("pc_dim_xy",) if square else ()
+    for key in (*keys, "pc_dim_th", "template_x_size", "template_y_size"):
         mine, theirs = state.config.get(key), flat.get(key)
         if mine is not None and theirs is not None and int(mine) != int(theirs):
             problems.append(f"{key} = {mine} in the map but {theirs} in the config")
@@ -86,7 +96,9 @@ def conform(state: MapState, config: Any, *, what: str = "stored map") -> MapSta
                 if k not in ("template_x_size", "template_y_size")
             },
         }
-    missing = [k for k in ("pc_dim_xy", "pc_dim_th") if k not in state.config]
+    missing = [
+        k for k in ("pc_dim_xy", "pc_dim_th", "pc_dim_x", "pc_dim_y") if k not in state.config
+    ]
     if state.scalars.get("imported_from") == "reference" and missing:
         state = state.copy()
         state.config.update({k: flat.get(k) for k in missing})

@@ -239,6 +239,12 @@ def load_map(directory: str | Path) -> MapState:
         v = meta["config"].get(k, 1)
         if not isinstance(v, int) or isinstance(v, bool) or v <= 0:
             raise MapFormatError(f"{d / STATE_JSON}: config {k} = {v!r} is not a positive integer")
+    for k in ("pc_dim_x", "pc_dim_y"):  # 0 (or absent, an older save): pc_dim_xy
+        v = meta["config"].get(k, 0)
+        if not isinstance(v, int) or isinstance(v, bool) or v < 0:
+            raise MapFormatError(
+                f"{d / STATE_JSON}: config {k} = {v!r} is not a non-negative integer"
+            )
     try:
         arrays: dict[str, Any] = _read_npz(d / STATE_NPZ)
         names = set(arrays)

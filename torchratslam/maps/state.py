@@ -32,6 +32,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import re
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any, cast
 
@@ -47,6 +48,7 @@ __all__ = [
     "PC_BEST",
     "PER_ENTITY",
     "MapState",
+    "config_pc_dims",
 ]
 
 MISSING_KEY = "missing_files"
@@ -91,6 +93,18 @@ def _f(a: Any, dtype: Any = np.float64) -> np.ndarray:
 
 def _i(a: Any) -> np.ndarray:
     return np.ascontiguousarray(np.asarray(a, dtype=np.int64))
+
+
+def config_pc_dims(config: Mapping[str, Any]) -> tuple[int, int, int]:
+    """The pose-cell ring sizes ``(X, Y, TH)`` a flat config gives: ``pc_dim_x`` and
+    ``pc_dim_y`` where set and non-zero, else ``pc_dim_xy`` (default 21); ``pc_dim_th``
+    (default 36)."""
+    xy = int(config.get("pc_dim_xy", 21))
+    return (
+        int(config.get("pc_dim_x") or 0) or xy,
+        int(config.get("pc_dim_y") or 0) or xy,
+        int(config.get("pc_dim_th", 36)),
+    )
 
 
 @dataclass
@@ -167,9 +181,10 @@ class MapState:
 
     @property
     def pc_dims(self) -> tuple[int, int, int]:
-        """(pc_dim_xy, pc_dim_xy, pc_dim_th) from the config: the x, y, th ring sizes."""
-        xy = int(self.config.get("pc_dim_xy", 21))
-        return xy, xy, int(self.config.get("pc_dim_th", 36))
+        """(X, Y, TH) from the config: the x, y, th ring sizes (``pc_dim_x`` and
+        ``pc_dim_y`` where set and non-zero, else ``pc_dim_xy``; a map saved before
+        those keys existed is square)."""
+        return config_pc_dims(self.config)
 
     def summary(self) -> dict[str, int]:
         """Counts for reports: templates, experiences, links."""
@@ -320,7 +335,8 @@ class MapState:
         if self.activity.size and self.activity.shape != (pcs[2], pcs[1], pcs[0]):
             raise bad(
                 f"pose-cell activity has shape {self.activity.shape}, but the map's config "
-                f"says (pc_dim_th, pc_dim_xy, pc_dim_xy) = {(pcs[2], pcs[1], pcs[0])}"
+                f"says (TH, Y, X) = {(pcs[2], pcs[1], pcs[0])} (pc_dim_th, pc_dim_y or "
+                "pc_dim_xy, pc_dim_x or pc_dim_xy)"
             )
         ty = int(self.config.get("template_y_size", int(self.templates.shape[1])))
         tx = int(self.config.get("template_x_size", int(self.templates.shape[2])))

@@ -20,7 +20,13 @@ import numpy as np
 from ratslam_graph.experience_map import ExperienceMap
 from torchratslam.sim.office.builder import Office
 
-__all__ = ["plot_experience_map", "plot_pc_path", "plot_temporal_map", "plot_trial_on_floor"]
+__all__ = [
+    "plot_experience_map",
+    "plot_goal_memory",
+    "plot_pc_path",
+    "plot_temporal_map",
+    "plot_trial_on_floor",
+]
 
 
 def _floor(ax: plt.Axes, office: Office) -> None:
@@ -33,13 +39,17 @@ def _floor(ax: plt.Axes, office: Office) -> None:
     )  # fmt: skip
 
 
-def plot_pc_path(pc: np.ndarray, dim_xy: int, title: str, path: Path) -> None:
+def plot_pc_path(pc: np.ndarray, dims: int | tuple[int, int], title: str, path: Path) -> None:
     """The packet's ``(x', y')`` path; steps over 2 cells are drawn dashed.
+
+    Args:
+        dims: the matrix's ``(X, Y)`` cells (one number: square).
 
     Shape:
         pc: (F, 3) cells.
     """
-    fig, ax = plt.subplots(figsize=(5, 5))
+    n_x, n_y = (dims, dims) if isinstance(dims, int) else dims
+    fig, ax = plt.subplots(figsize=(5, max(2.5, 5 * n_y / n_x)) if n_x >= n_y else (5, 5))
     xy = np.asarray(pc, np.float64)[:, :2]
     jump = np.hypot(*np.diff(xy, axis=0).T) > 2.0
     cuts = np.flatnonzero(jump) + 1
@@ -50,9 +60,8 @@ def plot_pc_path(pc: np.ndarray, dim_xy: int, title: str, path: Path) -> None:
     ax.plot([], [], "r--", label=f"jumps ({len(cuts)})")
     ax.plot(*xy[0], "go", label="start")
     ax.plot(*xy[-1], "ks", label="end")
-    ax.set(
-        xlim=(0, dim_xy), ylim=(0, dim_xy), xlabel="x' (cells)", ylabel="y' (cells)", title=title
-    )
+    ax.set(xlim=(0, n_x), ylim=(0, n_y), xlabel="x' (cells)", ylabel="y' (cells)", title=title)
+    ax.set_aspect("equal")
     ax.legend(loc="upper right", fontsize=7)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
@@ -125,6 +134,27 @@ def plot_trial_on_floor(
         ax.add_patch(plt.Rectangle((cx - w / 2, cy - h / 2), w, h, color="k", label="obstacle"))
     ax.set(xlabel="x (m)", ylabel="y (m)", title=title, aspect="equal")
     ax.legend(loc="upper right", fontsize=6)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def plot_goal_memory(
+    times: np.ndarray, dims: tuple[int, int], title: str, path: Path, label: str = "time (s)"
+) -> None:
+    """Goal memory's temporal map over the ``(x', y')`` cells (Fig. 4); cells it cannot
+    reach are left blank; ``label`` names the colour scale.
+
+    Shape:
+        times: (X * Y,) seconds, cell ``x + X y``.
+    """
+    n_x, n_y = dims
+    grid = np.asarray(times, np.float64).reshape(n_y, n_x)
+    grid = np.where(np.isfinite(grid), grid, np.nan)
+    fig, ax = plt.subplots(figsize=(5, max(2.5, 5 * n_y / n_x)))
+    im = ax.imshow(grid, origin="lower", cmap="viridis", extent=(0, n_x, 0, n_y))
+    fig.colorbar(im, ax=ax, label=label, shrink=0.8)
+    ax.set(xlabel="x' (cells)", ylabel="y' (cells)", title=title)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)

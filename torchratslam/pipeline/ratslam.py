@@ -256,7 +256,7 @@ class RatSLAM:
         return self.experience_map.activity_action(  # type: ignore[attr-defined]
             pc,
             int(view.template_id),
-            dims=(float(p.pc_dim_xy), float(p.pc_dim_th)),
+            dims=tuple(float(d) for d in p.dims),
             relative_rad=float(action.relative_rad),
         )
 

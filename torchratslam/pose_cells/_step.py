@@ -230,7 +230,8 @@ def _edge_loss(
     layer: np.ndarray,
     box_y: tuple[int, int],
     box_x: tuple[int, int],
-    n: int,
+    n_y: int,
+    n_x: int,
     sin: np.ndarray,
     cos: np.ndarray,
     cells: np.ndarray,
@@ -242,10 +243,12 @@ def _edge_loss(
     would have reached."""
     pos_y = np.empty(2, np.int64)
     pos_x = np.empty(2, np.int64)
-    for e, g in enumerate((0, n - 1)):  # local position of the ring's first and last cell
-        p = (g - box_y[0]) % n
+    for e in range(2):  # local position of each ring's first and last cell
+        g = 0 if e == 0 else n_y - 1
+        p = (g - box_y[0]) % n_y
         pos_y[e] = p if p < box_y[1] else -1
-        p = (g - box_x[0]) % n
+        g = 0 if e == 0 else n_x - 1
+        p = (g - box_x[0]) % n_x
         pos_x[e] = p if p < box_x[1] else -1
     take = np.zeros(1, out.dtype)
     for k in range(out.shape[0]):
@@ -370,6 +373,7 @@ def step_crop(
                 it,
                 (box[1, 0], box[1, 1]),
                 (box[2, 0], box[2, 1]),
+                dims[1],
                 dims[2],
                 edge[0],
                 edge[1],

@@ -23,8 +23,7 @@ class CentreDecoder:
     """
 
     def __init__(self, params: PoseCellParams) -> None:
-        xy, th = params.pc_dim_xy, params.pc_dim_th
-        self.dims = (xy, xy, th)
+        self.dims = params.dims
         self.cells_to_avg = params.pc_cells_to_avg
         self.cpp_decode = params.pc_decode == "openratslam"
         self._lookups: dict[int, tuple[np.ndarray, np.ndarray]] = {}

@@ -409,7 +409,7 @@ def edge_loss_(
     src: torch.Tensor,
     plan: dict[str, np.ndarray],
     starts: tuple[np.ndarray, np.ndarray] | None,
-    n: int,
+    n: tuple[int, int],
 ) -> None:
     """Take from ``out`` what OpenRatSLAM drops at the x/y wrap: the moves of two
     corner cells of each layer (of ``src``, before the move) across the edge.
@@ -420,20 +420,21 @@ def edge_loss_(
         plan: a translation plan with ``lost``, ``src`` and ``corner``
             (:meth:`~torchratslam.pose_cells.motion.MotionTables.translation_plan`).
         starts: the crop's global y and x starts per network; None for the whole ring.
-        n: the x/y ring size.
+        n: the y and x ring sizes.
 
     Shape:
         out, src: ``(B, T, LY, LX)``.
     """
     b, t, ly, lx = out.shape
-    ends = np.array([0, n - 1])
     pos = []
-    for start, length in zip(
+    for start, length, ring in zip(
         starts if starts is not None else (np.zeros(b, np.int64), np.zeros(b, np.int64)),
         (ly, lx),
+        n,
         strict=True,
     ):
-        p = np.remainder(ends[None, :] - start[:, None], n)  # (B, 2)
+        ends = np.array([0, ring - 1])
+        p = np.remainder(ends[None, :] - start[:, None], ring)  # (B, 2)
         pos.append(np.where(p < length, p, -1))
     if (pos[0] < 0).all() or (pos[1] < 0).all():
         return

@@ -80,11 +80,11 @@ def _torch_method(params: PoseCellParams, method: str, crop_fraction: float) -> 
     box is at most ``crop_fraction`` of the network)."""
     if method != "auto":
         return method
-    xy, th = params.pc_dim_xy, params.pc_dim_th
+    n_x, n_y, th = params.dims
     # cells the dynamics can reach: excitation, then inhibition of the excited activity
     reach = params.pc_w_e_dim // 2 + params.pc_w_i_dim // 2
-    box = [min(e + 2 * (reach + 2), n) for e, n in zip(TYPICAL_PACKET, (th, xy, xy), strict=True)]
-    small = box[0] * box[1] * box[2] <= crop_fraction * th * xy * xy
+    box = [min(e + 2 * (reach + 2), n) for e, n in zip(TYPICAL_PACKET, (th, n_y, n_x), strict=True)]
+    small = box[0] * box[1] * box[2] <= crop_fraction * th * n_y * n_x
     return "crop" if small else "separable"
 
 
@@ -160,10 +160,10 @@ class PoseCellNetwork(nn.Module):
         self.method = _torch_method(
             params, "auto" if method == "numpy" else method, self.crop_fraction
         )
-        xy, th = params.pc_dim_xy, params.pc_dim_th
-        self.dims = (xy, xy, th)
+        n_x, n_y, th = params.dims
+        self.dims = (n_x, n_y, th)
         self.register_buffer(
-            "activity", torch.zeros(self.batch_size, th, xy, xy, dtype=dtype, device=device)
+            "activity", torch.zeros(self.batch_size, th, n_y, n_x, dtype=dtype, device=device)
         )
         self.register_buffer(
             "best", torch.zeros(self.batch_size, 3, dtype=torch.float64, device=device)
@@ -422,7 +422,7 @@ class PoseCellNetwork(nn.Module):
         if tuple(a.shape) != tuple(self.activity.shape):
             raise MapFormatError(
                 f"pose-cell activity has shape {tuple(a.shape)}, the network needs "
-                f"{tuple(self.activity.shape)} (check pc_dim_xy / pc_dim_th)"
+                f"{tuple(self.activity.shape)} (check pc_dim_xy / pc_dim_x / pc_dim_y / pc_dim_th)"
             )
         # finite, not necessarily non-negative: OpenRatSLAM's path integration (its
         # one-cell weights, pc_multi_cell false) turns cells negative when the packet moves

@@ -37,9 +37,9 @@ class NumpyEngine:
     """
 
     def __init__(self, params: PoseCellParams, dtype: torch.dtype) -> None:
-        xy, th = params.pc_dim_xy, params.pc_dim_th
+        n_x, n_y, th = params.dims
         self.params = params
-        self.dims = (xy, xy, th)
+        self.dims = (n_x, n_y, th)
         self.dtype = dtype
         self.kernels = {
             "e": F.gaussian_kernel_1d(params.pc_w_e_dim, params.pc_w_e_var),
@@ -47,7 +47,7 @@ class NumpyEngine:
         }
         self.motion = MotionTables(params)
         self.decoder = CentreDecoder(params)
-        self.last_crop: tuple[int, int, int] = (th, xy, xy)
+        self.last_crop: tuple[int, int, int] = (th, n_y, n_x)
         """The box (theta, y, x cells) the last step computed on."""
         self._taps: dict[str, tuple[np.ndarray, np.ndarray, Any]] = {}
         self._geo_tables: dict[bool, tuple[np.ndarray, ...]] = {}  # per direction of travel

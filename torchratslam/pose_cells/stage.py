@@ -289,9 +289,10 @@ class PoseCells:
         Keys: ``activity`` (TH, Y, X), ``template_pc`` (N, 3), ``template_decay`` (N,),
         ``exp_pc`` (M, 3), ``exp_template`` (M,), ``best`` (3,), ``current_exp``,
         ``current_vt``, ``prev_vt``, ``vt_delta_pc_th``, ``relative_rad``,
-        ``odo_update``, ``vt_update``, ``pc_dim_xy``, ``pc_dim_th``.
+        ``odo_update``, ``vt_update``, ``pc_dim_xy``, ``pc_dim_th``; a network with X != Y
+        also ``pc_dim_x`` and ``pc_dim_y`` (a square one's dictionary is as before).
         """
-        return {
+        state = {
             "activity": self.activity.detach().cpu().numpy().copy(),
             "template_pc": self.template_pc.copy(),
             "template_decay": self.template_decay.copy(),
@@ -308,6 +309,10 @@ class PoseCells:
             "pc_dim_xy": int(self.params.pc_dim_xy),
             "pc_dim_th": int(self.params.pc_dim_th),
         }
+        n_x, n_y, _ = self.dims
+        if n_x != n_y:
+            state["pc_dim_x"], state["pc_dim_y"] = int(n_x), int(n_y)
+        return state
 
     def set_state(self, state: dict[str, Any]) -> None:
         """Restore :meth:`get_state`'s dictionary.
@@ -332,14 +337,16 @@ class PoseCells:
             state.get("template_decay", np.full(len(tpc), self.params.vt_active_decay)),
             dtype=np.float64,
         ).reshape(-1)
-        for key, want in (
-            ("pc_dim_xy", self.params.pc_dim_xy),
-            ("pc_dim_th", self.params.pc_dim_th),
-        ):
-            if key in state and int(state[key]) != want:
+        n_x, n_y, n_th = self.dims
+        saved_xy = state.get("pc_dim_xy")
+        for key, want in (("pc_dim_x", n_x), ("pc_dim_y", n_y), ("pc_dim_th", n_th)):
+            # a save without pc_dim_x / pc_dim_y (square, or older) sizes both by pc_dim_xy
+            got = state.get(key, saved_xy if key != "pc_dim_th" else None)
+            if got is not None and int(got) != want:
+                name = key if key in state else "pc_dim_xy"
                 raise MapFormatError(
-                    f"pose-cell state was saved with {key}={state[key]}, this module has {want}; "
-                    "load it with the same config"
+                    f"pose-cell state was saved with {name}={got}, this module has "
+                    f"{key}={want}; load it with the same config"
                 )
         if len(decay) != len(tpc) or len(etpl) != len(epc):
             raise MapFormatError(

@@ -34,6 +34,8 @@ _SCALARS: dict[str, type] = {
     "vt_update": bool,
     "pc_dim_xy": int,
     "pc_dim_th": int,
+    "pc_dim_x": int,
+    "pc_dim_y": int,
 }
 _KNOWN = (
     "activity",
@@ -69,8 +71,9 @@ class PoseCellState:
         exp_template: ``(M,)`` int64 template of each experience.
         best: ``(3,)`` float64 last decoded packet centre (None: not given).
         current_exp, current_vt, prev_vt: ids (None: not given).
-        vt_delta_pc_th, relative_rad, odo_update, vt_update, pc_dim_xy, pc_dim_th: the
-            module's scalars (None: not given).
+        vt_delta_pc_th, relative_rad, odo_update, vt_update, pc_dim_xy, pc_dim_th,
+            pc_dim_x, pc_dim_y: the module's scalars (None: not given; a square network
+            gives no pc_dim_x / pc_dim_y).
         extra: further keys of the module's dictionary, in its order.
     """
 
@@ -91,6 +94,8 @@ class PoseCellState:
     vt_update: bool | None = None
     pc_dim_xy: int | None = None
     pc_dim_th: int | None = None
+    pc_dim_x: int | None = None
+    pc_dim_y: int | None = None
     extra: Mapping[str, Any] = field(default_factory=dict)
 
     def __post_init__(self) -> None:

@@ -41,10 +41,10 @@ class TorchEngine:
     def __init__(
         self, params: PoseCellParams, method: str, dtype: torch.dtype, device: Any
     ) -> None:
-        xy, th = params.pc_dim_xy, params.pc_dim_th
+        n_x, n_y, th = params.dims
         self.params = params
         self.method = method
-        self.dims = (xy, xy, th)
+        self.dims = (n_x, n_y, th)
         self.dtype = dtype
         self.device = torch.device(device) if device is not None else torch.device("cpu")
         self.kernels = {
@@ -53,7 +53,7 @@ class TorchEngine:
         }
         self.motion = MotionTables(params)
         self.decoder = CentreDecoder(params)
-        self.last_crop: tuple[int, int, int] = (th, xy, xy)
+        self.last_crop: tuple[int, int, int] = (th, n_y, n_x)
         """The box (theta, y, x cells) the last step computed on."""
         self._mats: dict[tuple[str, int, bool], torch.Tensor] = {}
         self._work: torch.Tensor | None = None
@@ -188,7 +188,7 @@ class TorchEngine:
                 F.shift_one_(pool, plan["step_x"], plan["w_x"], 3, self._gather_cache)
                 F.shift_one_(pool, plan["step_y"], plan["w_y"], 2, self._gather_cache)
                 if mo.edge_loss:
-                    F.edge_loss_(pool[0], src, plan, starts_yx, self.dims[0])
+                    F.edge_loss_(pool[0], src, plan, starts_yx, (self.dims[1], self.dims[0]))
             else:
                 direction = k * (2.0 * math.pi / n_th) + np.where(trans < 0, math.pi, 0.0)[:, None]
                 mag = np.abs(trans)[:, None]

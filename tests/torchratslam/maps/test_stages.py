@@ -85,3 +85,46 @@ def test_wrong_shapes_raise_map_format_errors():
         ExperienceMapState.empty().replace(link_ends=np.zeros((1, 2), np.int64))
     with pytest.raises(MapFormatError, match="link_values"):
         ExperienceMapState.from_dict({"link_ends": np.zeros((0, 2))})
+
+
+def _run_with(config, n: int, seed: int = 3, slam: RatSLAM | None = None) -> RatSLAM:
+    rng = np.random.default_rng(seed)
+    slam = slam if slam is not None else RatSLAM(config)
+    for _ in range(n):
+        slam.step(rng.random((12, 20)), (0.3, rng.normal(0, 0.2), 0.1))
+    return slam
+
+
+def test_a_rectangular_network_saves_its_shape_and_continues_bit_identically(tmp_path):
+    from torchratslam.maps.native import load_map, save_map
+
+    cfg = CONFIG.replace(pc_dim_x=9, pc_dim_y=6)
+    slam = _run_with(cfg, 20)
+    state = state_from_slam(slam)
+    assert state.pc_dims == (9, 6, 10) and state.activity.shape == (10, 6, 9)
+    save_map(state, tmp_path / "m")
+    back = load_map(tmp_path / "m")
+    assert back.pc_dims == (9, 6, 10)
+    fresh = RatSLAM(cfg)
+    apply_state(back, fresh)
+    _run_with(cfg, 10, seed=4, slam=slam)
+    _run_with(cfg, 10, seed=4, slam=fresh)
+    assert np.array_equal(
+        slam.pose_cells.get_state()["activity"], fresh.pose_cells.get_state()["activity"]
+    )
+    # a config of another shape is refused in one line naming both shapes
+    with pytest.raises(MapFormatError, match=r"\(X, Y\) = \(9, 6\) in the map but \(6, 9\)"):
+        apply_state(back, RatSLAM(CONFIG.replace(pc_dim_x=6, pc_dim_y=9)))
+
+
+def test_a_map_saved_before_pc_dim_x_existed_is_square(tmp_path):
+    from torchratslam.maps.native import load_map, save_map
+
+    state = state_from_slam(_run())
+    state.config = {k: v for k, v in state.config.items() if k not in ("pc_dim_x", "pc_dim_y")}
+    save_map(state, tmp_path / "old")
+    back = load_map(tmp_path / "old")
+    assert back.pc_dims == (7, 7, 10)
+    fresh = RatSLAM(CONFIG)
+    apply_state(back, fresh)
+    assert np.array_equal(fresh.pose_cells.get_state()["activity"], state.activity)

@@ -15,9 +15,16 @@ def _run(name, tmp_path):
 
 def test_goal_recall_quick_reaches_goals_on_a_small_floor(tmp_path):
     d = _run("edge/goal-recall", tmp_path)
-    trials = d["details"]["trials"]
+    trials = [t for t in d["details"]["trials"] if t["map"] == "paper"]
     assert {t["matrix"] for t in trials} == {"100x40x36", "40x20x36"}
     assert sum(t["reached"] for t in trials) >= len(trials) - 1
+    # the comparison ran the same goals with OpenRatSLAM's rule
+    other = [t for t in d["details"]["trials"] if t["map"] == "pc_distance"]
+    assert [(t["matrix"], t["goal"]) for t in other] == [(t["matrix"], t["goal"]) for t in trials]
+    # each matrix ran with its own X != Y shape, and the rows' paper cell is the paper's text
+    dims = {m["matrix"]: m["pc_dims"] for m in d["details"]["matrices"].values()}
+    assert all(x != y for x, y, _ in dims.values())
+    assert d["rows"][0]["paper"] == "12/12"
     for t in trials:
         if t["reached"]:
             assert 0.5 * t["shortest_m"] <= t["path_m"] <= 6.0 * t["shortest_m"]
@@ -32,6 +39,8 @@ def test_adaptation_quick_behaves_as_the_paper_reports(tmp_path):
     # trial 1: planned through the obstacle, links near it deleted, reached the other way
     assert t1["planned_through_obstacle"]
     assert t1["links_deleted"] > 0
+    assert 0 < t1["links_deleted_near_obstacle"] <= t1["links_deleted"]
+    assert d["details"]["as_the_paper"]
     assert t1["reached"] and t1["route"] == "long"
     # trial 2: the long route at once
     assert not t2["planned_through_obstacle"]
