@@ -11,12 +11,12 @@ from types import MappingProxyType, ModuleType
 
 from ratslam_graph.errors import unknown_name_message
 from torchratslam.errors import InputError
-from torchratslam.experiments.reproduce import edge, mbaram, multisession, xratslam
+from torchratslam.experiments.reproduce import edge, mbaram, multisession, robodeck, xratslam
 from torchratslam.experiments.reproduce.report import Experiment
 
 __all__ = ["all_experiments", "get_experiment"]
 
-MODULES: tuple[ModuleType, ...] = (edge, mbaram, multisession, xratslam)
+MODULES: tuple[ModuleType, ...] = (edge, mbaram, multisession, xratslam, robodeck)
 """The experiment modules (each with an ``EXPERIMENTS`` tuple), in the listing's order."""
 
 

@@ -31,7 +31,7 @@ import numpy as np
 from torchratslam.errors import InputError
 from torchratslam.experiments.reproduce.report import Experiment, ExperimentContext, Report, Row
 
-__all__ = ["EXPERIMENTS", "find_openratslam_build", "openratslam_traces"]
+__all__ = ["EXPERIMENTS", "cpp_loop_seconds", "find_openratslam_build", "openratslam_traces"]
 
 log = logging.getLogger(__name__)
 
@@ -131,6 +131,16 @@ def _cpp_from_trace(trace: Path, n: int) -> _CppRun:
     )
 
 
+def cpp_loop_seconds(out: Path) -> float:
+    """The C++ driver's loop time (``summary.txt``'s ``loop_wall_s``: the frames
+    processed, images decoded before it, as torchratslam's runs are timed)."""
+    for line in (out / "summary.txt").read_text().splitlines():
+        key, _, value = line.partition("=")
+        if key.strip() == "loop_wall_s":
+            return float(value)
+    raise InputError(f"{out / 'summary.txt'} has no loop_wall_s")
+
+
 def _cpp_side_by_side(build: Path, session: Any, config_txt: str, work: Path) -> _CppRun:
     from torchratslam.sim import write_dataset
 
@@ -138,7 +148,6 @@ def _cpp_side_by_side(build: Path, session: Any, config_txt: str, work: Path) ->
     (data / "config.txt").write_text(config_txt)
     out = work / "cpp"
     out.mkdir()
-    t0 = time.perf_counter()
     with open(out / "stdout.log", "w") as fh:
         subprocess.run(
             [str(build / "ratslam_driver"), str(data / "config.txt"), str(data), str(out)],
@@ -146,7 +155,7 @@ def _cpp_side_by_side(build: Path, session: Any, config_txt: str, work: Path) ->
             stdout=fh,
             stderr=subprocess.DEVNULL,
         )
-    wall = time.perf_counter() - t0
+    wall = cpp_loop_seconds(out)
     fr = _read_csv(out / "frames.csv")
     exp = _read_csv(out / "experiences.csv")
     links = len(_read_csv(out / "links.csv").get("from", ()))
