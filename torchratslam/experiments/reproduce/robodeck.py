@@ -237,8 +237,16 @@ def _robodeck(ctx: ExperimentContext) -> Report:
         ),
         "The paper's xRatSLAM ran OpenRatSLAM's modules in threads under its own "
         "scheduler; its maps differed from OpenRatSLAM's (ROS message order). Here the "
-        "default reproduces OpenRatSLAM's decisions, so its residual is near zero; the "
-        "recommended profile (the project's choices) is the run whose map differs.",
+        "default reproduces OpenRatSLAM's decisions"
+        + (f" (residual {icp['ours']:.3g} m^2)" if build is not None else "")
+        + "; the recommended profile (the project's choices over the lab_tour config's "
+        + (
+            "keys) gives the same map here"
+            if runs["recommended"]["experiences"] == runs["openratslam"]["experiences"]
+            and icp["recommended"] < 1e-12
+            else "keys) gives another map"
+        )
+        + f" (residual {icp['recommended']:.3g} m^2).",
     ) + ((f"Quick version: the first {QUICK_FRAMES} frames.",) if ctx.quick else ())
     details = {
         "frames": n,
