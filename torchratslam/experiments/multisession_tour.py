@@ -240,15 +240,32 @@ def tour_clock(tour: Any) -> _Clock:
 
 
 def single_run(
-    config: RatSLAMConfig, frames: Any, n: int | None, progress: bool | str, **ratslam_kwargs: Any
+    config: RatSLAMConfig,
+    frames: Any,
+    n: int | None,
+    progress: bool | str,
+    *,
+    odometry_stats: dict[str, Any] | None = None,
+    **ratslam_kwargs: Any,
 ) -> tuple[MapState, float]:
     """One single-session map over ``frames`` and its wall time (s); ``progress``: a
-    bar, labelled when a label is given."""
+    bar, labelled when a label is given. ``odometry_stats``, when given, receives the
+    visual odometry's :meth:`~torchratslam.readers.visual_odometry.VisualOdometry.limits`
+    and the mean translation per frame, estimated and true (nothing for other sources)."""
     from torchratslam.maps.running import state_from_slam
 
     t0 = time.perf_counter()
     slam = RatSLAM(config, **ratslam_kwargs)
     slam.run(frames, max_frames=n, progress=progress)
+    limits = getattr(slam.odometry, "limits", None)
+    if odometry_stats is not None and callable(limits):
+        odometry_stats.update(limits())
+        odo = slam.odometry_log()[1:]
+        truth = slam.groundtruth_poses()
+        odometry_stats["mean_translation_m"] = float(np.mean(odo[:, 0] * odo[:, 2]))
+        if truth is not None and len(truth) > 1:
+            step = np.hypot(*np.diff(np.asarray(truth)[:, :2], axis=0).T)
+            odometry_stats["true_mean_translation_m"] = float(np.nanmean(step))
     return state_from_slam(slam), time.perf_counter() - t0
 
 
@@ -468,9 +485,15 @@ def run_tour(
     def bar(label: str) -> bool | str:
         return label if progress else False
 
+    odometry_stats: dict[str, Any] = {}
     singles = {  # the paper's single session; the concatenation; the last session alone
         "single": single_run(
-            config, clock.cont.frames(), limit, bar("single session"), **ratslam_kwargs
+            config,
+            clock.cont.frames(),
+            limit,
+            bar("single session"),
+            odometry_stats=odometry_stats,
+            **ratslam_kwargs,
         ),
         "single_concatenated": single_run(
             config, clock.full.frames(), limit, bar("sessions concatenated"), **ratslam_kwargs
@@ -484,6 +507,8 @@ def run_tour(
         config, tour.sessions, offsets=clock.offsets, save_dir=save, observer=observer, **kw
     )
     report, icps = _comparison(tour, clock, config, singles, multi)
+    if odometry_stats:  # visual odometry: how often it sat on a limit (continuous run)
+        report["visual_odometry"] = odometry_stats
     if merge_options:
         report["merge_options"] = dict(merge_options)
     if session_options:

@@ -4,7 +4,8 @@ Importing this module registers, explicitly and once: local views ``"ratslam"``
 (:class:`~torchratslam.local_view.view.LocalView`), ``"features"``
 (:class:`~torchratslam.local_view.view.FeatureView`) and ``"recoded"``
 (:class:`~torchratslam.local_view.recoded.RecodedView`, xRatSLAM's RecodedLV: the newest
-matching template), pose cells ``"ratslam"``
+matching template) and ``"linear"`` (:class:`~torchratslam.local_view.linear.LinearScanView`,
+OpenRatSLAM's linear scan over every template), pose cells ``"ratslam"``
 (:class:`~torchratslam.pose_cells.stage.PoseCells`), experience map ``"ratslam"``
 (:class:`~ratslam_graph.experience_map.ExperienceMap`) and odometry sources ``"given"``
 (the reader's wheel odometry) and ``"visual"`` (intensity-profile visual odometry). The
@@ -22,6 +23,7 @@ from __future__ import annotations
 from ratslam_graph.experience_map import ExperienceMap
 from ratslam_graph.params import ExperienceMapParams
 from torchratslam.config import VisualOdometryParams
+from torchratslam.local_view.linear import LinearScanView
 from torchratslam.local_view.recoded import RecodedView
 from torchratslam.local_view.view import FeatureView, LocalView
 from torchratslam.pose_cells.stage import PoseCells
@@ -47,6 +49,7 @@ DEFAULTS: tuple[tuple[Registry, str, object], ...] = (
     (LOCAL_VIEWS, "ratslam", LocalView),
     (LOCAL_VIEWS, "features", FeatureView),
     (LOCAL_VIEWS, "recoded", RecodedView),
+    (LOCAL_VIEWS, "linear", LinearScanView),
     (POSE_CELLS, "ratslam", PoseCells),
     (EXPERIENCE_MAPS, "ratslam", _experience_map),
     (ODOMETRY, "given", _given_odometry),

@@ -146,9 +146,24 @@ class VisualOdometry(nn.Module):
         self.reset()
 
     def reset(self) -> None:
-        """Forget the previous image (the next one gives zero motion)."""
+        """Forget the previous image (the next one gives zero motion) and the counts of
+        :meth:`limits`."""
         self._prev_trans: np.ndarray | None = None
         self._prev_rot: np.ndarray | None = None
+        self._counts = [0, 0, 0]  # frames compared, at vtrans_max, at the shift limit
+
+    def limits(self) -> dict[str, float | int]:
+        """How often the estimate sat on a limit since :meth:`reset`: ``frames`` (images
+        compared with a previous one), ``vtrans_max`` (the fraction whose speed was
+        clamped at ``vtrans_max``) and ``vrot_limit`` (the fraction whose best rotation
+        shift was the largest searched, ``max_shift - 1`` columns either way: the turn
+        may have been larger)."""
+        n, at_v, at_r = self._counts
+        return {
+            "frames": n,
+            "vtrans_max": at_v / n if n else 0.0,
+            "vrot_limit": at_r / n if n else 0.0,
+        }
 
     def on_image(self, image: np.ndarray | None) -> tuple[float, float]:
         """Speed and turn rate since the previous image.
@@ -187,6 +202,9 @@ class VisualOdometry(nn.Module):
         if self.mirrored:
             vrot = -vrot
         vtrans = min(trans_diff * p.vtrans_scaling, p.vtrans_max)
+        self._counts[0] += 1
+        self._counts[1] += int(trans_diff * p.vtrans_scaling >= p.vtrans_max)
+        self._counts[2] += int(abs(shift) >= min(self.max_shift, rot.shape[0]) - 1)
         return float(vtrans), float(vrot)
 
     def forward(self, frame: Frame) -> tuple[float, float, float]:

@@ -147,7 +147,12 @@ def _route(r: RouteSpec, seed: int, own: Mapping[str, Any], n: int = 0, ds: floa
     if isinstance(r, EllipseRoute):
         return Route.ellipse(r.a, r.b, start_deg=r.start_deg)
     if isinstance(r, PolygonRoute):
-        return Route.polygon(list(r.corners), radius=resolve(r.radius, own), closed=r.closed)
+        return Route.polygon(
+            list(r.corners),
+            radius=resolve(r.radius, own),
+            n_arc=max(2, round(resolve(r.arc_points, own))),
+            closed=r.closed,
+        )
     pitch = own["block_size"] + own["street_width"]
     n_nodes = int(own["blocks"]) + 1
     rng = np.random.default_rng([seed, r.seed_key])

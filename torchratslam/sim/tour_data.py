@@ -5,7 +5,8 @@
   session2: 2.9 laps from an unmapped point 0.873 lap round, reaching session1's
   start after 19 frames and replaying its frames from there (436 frames).
 * ``lab_tour`` (Fig. 6): two rectangles forming a digital "8"; 640x480 forward camera
-  (50 degrees), 1 Hz, 0.25 m/s. session1: two CCW laps of the small rectangle (153);
+  (50 degrees), 1 Hz, 0.25 m/s; corners of ``corner_radius`` (0.6 m) drawn through
+  ``arc_points`` (24) points. session1: two CCW laps of the small rectangle (153);
   session2: 1.9 CCW laps of the large one from an unmapped point (206).
 * ``irat_like`` (Fig. 7): a 2 x 2 block road network at iRat scale (2.4 x 1.6 m);
   160x96 forward camera (75 degrees), 10 Hz, 0.2 m/s. session1-4: one CCW lap around
@@ -112,11 +113,14 @@ VIRTUAL_TOUR = TourSpec(
     bridges=((Leg("ellipse"),),),
 )
 
+# the lab's corners: radius and the points each arc is drawn through (tour options)
+_LAB_R, _LAB_ARC = Opt("corner_radius"), Opt("arc_points")
+
 LAB_TOUR = TourSpec(
     name="lab_tour",
     description="multisession Fig. 6: two CCW laps of the small rectangle, 1.9 of the large",
-    options={"speed": 0.25, "hz": 1.0},
-    positive=(("speed", 0.0), ("hz", 0.0)),
+    options={"speed": 0.25, "hz": 1.0, "corner_radius": 0.6, "arc_points": 24},
+    positive=(("speed", 0.0), ("hz", 0.0), ("corner_radius", 0.0), ("arc_points", 2.0)),
     world=WorldSpec(
         walls=(
             Polyline(((-2.5, -2.5), (8.5, -2.5), (8.5, 10.5), (-2.5, 10.5))),
@@ -132,8 +136,8 @@ LAB_TOUR = TourSpec(
         wall_height=2.5,
     ),
     routes={
-        "small": PolygonRoute(((0, 4), (6, 4), (6, 8), (0, 8)), radius=0.6),
-        "large": PolygonRoute(((0, 0), (6, 0), (6, 8), (0, 8)), radius=0.6),
+        "small": PolygonRoute(((0, 4), (6, 4), (6, 8), (0, 8)), _LAB_R, arc_points=_LAB_ARC),
+        "large": PolygonRoute(((0, 0), (6, 0), (6, 8), (0, 8)), _LAB_R, arc_points=_LAB_ARC),
     },
     # the small loop starts mid-bar heading +x; the large one mid-bottom heading +x
     sessions=(

@@ -112,11 +112,14 @@ class WorldSpec:
 
 @dataclass(frozen=True)
 class PolygonRoute:
-    """A polygon with rounded corners (:meth:`Route.polygon`)."""
+    """A polygon with rounded corners (:meth:`Route.polygon`), each arc drawn through
+    ``arc_points`` points (a turn of ``a`` degrees turns in steps of ``a / (arc_points -
+    1)`` degrees)."""
 
     corners: tuple[Point, ...]
     radius: Number
     closed: bool = True
+    arc_points: Number = 24.0
 
 
 @dataclass(frozen=True)

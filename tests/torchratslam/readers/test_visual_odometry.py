@@ -80,6 +80,23 @@ def test_speed_is_scaled_min_difference_and_capped():
     assert v == 5.0
 
 
+def test_limits_count_the_frames_clamped_at_vtrans_max_and_at_the_shift_limit():
+    p = VisualOdometryParams(vtrans_scaling=100.0, vtrans_max=5.0, camera_fov_deg=360.0)
+    vo = VisualOdometry(p, max_shift=10)
+    rng = np.random.default_rng(1)
+    img = (np.tile(rng.random(60), (8, 1)) * 200).astype(np.uint8)
+    assert vo.limits() == {"frames": 0, "vtrans_max": 0.0, "vrot_limit": 0.0}
+    vo.on_image(img)  # primes only
+    vo.on_image(img + 2)  # 0.78 m/s: free
+    vo.on_image(img + 42)  # 16 m/s: clamped
+    vo.on_image(np.roll(img + 42, 3, axis=1))  # a 3-column turn: inside the search
+    vo.on_image(np.roll(img + 42, 3 + 9, axis=1))  # 9 columns: the largest searched
+    lim = vo.limits()
+    assert lim["frames"] == 4 and lim["vtrans_max"] == 0.25 and lim["vrot_limit"] == 0.25
+    vo.reset()
+    assert vo.limits()["frames"] == 0
+
+
 def test_odometry_sources_return_vtrans_vrot_dt():
     p = VisualOdometryParams(camera_hz=4.0)
     vo = VisualOdometry(p)

@@ -89,3 +89,17 @@ def test_tour_data_round_trips_through_the_builder(name):
         walk = route.at(s0 + ds * np.arange(n))
         np.testing.assert_allclose(sess.poses[:, :2], walk, atol=1e-3)
         np.testing.assert_allclose(np.diff(sess.times), 1.0 / own["hz"])
+
+
+def test_lab_tour_arc_points_set_the_steps_of_its_turns():
+    from torchratslam.sim import open_sim
+
+    def max_turn_deg(options):
+        s = open_sim(f"sim:lab_tour/session1?speed=0.03&{options}")
+        th = np.unwrap(np.asarray(s.groundtruth(), np.float64)[:, 3])
+        return float(np.degrees(np.abs(np.diff(th))).max())
+
+    # a 0.6 m corner at 0.03 m a frame turns 2.9 degrees a frame; drawn through 24 points
+    # it turns in 90 / 23 = 3.9-degree steps instead, through 96 in 0.95-degree ones
+    assert max_turn_deg("arc_points=24") == pytest.approx(90 / 23, abs=0.1)
+    assert max_turn_deg("arc_points=96") < 3.0

@@ -17,6 +17,7 @@ from torchratslam.experiments.reproduce import (
     edge_long,
     mbaram,
     multisession,
+    robodeck,
     xratslam,
 )
 from torchratslam.experiments.reproduce.report import Experiment
@@ -30,6 +31,7 @@ MODULES: tuple[ModuleType, ...] = (
     mbaram,
     multisession,
     xratslam,
+    robodeck,
 )
 """The experiment modules (each with an ``EXPERIMENTS`` tuple), in the listing's order."""
 

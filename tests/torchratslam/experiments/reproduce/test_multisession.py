@@ -46,8 +46,14 @@ def test_every_experiment_is_in_the_catalogue():
 
 def test_virtual_tour_merges_with_visual_and_with_wheel_odometry(tmp_path):
     report, rows = _run("multisession/virtual-tour", tmp_path)
-    assert rows["odometry used by the paper (Table 1 / Section 4)"].paper == "visual"
     vis, wheel = report.details["visual"], report.details["wheel"]
+    odo = rows["odometry (the paper's; ours: what these rows ran)"]
+    assert (odo.paper, odo.ours) == ("visual", "visual, wheel")
+    # the visual odometry's limits are measured: quick runs the default, fast tour, on
+    # which Table 1's visual odometry sits on vtrans_max nearly every frame
+    vo = vis["visual_odometry"]
+    assert vo["frames"] > 0 and vo["vtrans_max"] > 0.5
+    assert "visual_odometry" not in wheel
     for d in (vis, wheel):
         (m,) = _merges(d)  # one merge, in session 2, of session 1's map
         assert m["session"] == "session2" and m["scenario"] == "ii"
