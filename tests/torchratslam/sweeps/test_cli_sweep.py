@@ -63,3 +63,23 @@ def test_sweep_command_writes_the_table(tmp_path, capsys):
     out = capsys.readouterr().out
     assert "2 runs (0 failed)" in out and "best ATE" in out
     assert (tmp_path / "o" / "results.csv").read_text().count("\n") == 3
+
+
+def test_resume_with_another_grid_keeps_the_first_sweeps_rows(tmp_path, capsys):
+    """sweep A --out D, then sweep B --out D --resume (B another grid) refuses in one line
+    and leaves A's finished rows in results.csv byte for byte."""
+    head = "base: virtual_tour\nset: {pc_dim_xy: 21}\ndatasets: ['sim:loop?frames=8&lasers=0']\n"
+    a, b = tmp_path / "a.yaml", tmp_path / "b.yaml"
+    a.write_text(head + "parameters: {exp_loops: [1, 3]}\n")
+    b.write_text(head + "parameters: {exp_loops: [2, 4]}\n")
+    out = tmp_path / "d"
+    common = ["--out", str(out), "--workers", "1", "--no-progress", "--no-figures"]
+    assert main(["sweep", str(a), *common]) == 0
+    table = (out / "results.csv").read_bytes()
+    capsys.readouterr()
+    code = main(["sweep", str(b), *common, "--resume"])
+    err = capsys.readouterr().err
+    assert code == 2
+    assert "2 runs of another sweep" in err and "Traceback" not in err
+    assert sum("error:" in line for line in err.splitlines()) == 1
+    assert (out / "results.csv").read_bytes() == table
