@@ -137,6 +137,9 @@ def check_odometry(
     Raises:
         InputError: naming the line, the value and the limit.
     """
+    for arg, limit in (("max_speed", max_speed), ("max_turn_rate", max_turn_rate)):
+        if not (np.isfinite(limit) and limit > 0):
+            raise InputError(f"{arg} = {limit!r}: a limit must be a finite number above 0")
     for name, v, limit, unit, option in (
         ("vtrans", vtrans, max_speed, "m/s", "--max-speed"),
         ("vrot", vrot, max_turn_rate, "rad/s", "--max-turn-rate"),

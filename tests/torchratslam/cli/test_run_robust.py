@@ -391,3 +391,26 @@ def test_run_help_says_what_run_does_and_shows_the_required_options(capsys):
     assert "files in it are replaced" not in text
     assert "replaces only the files it wrote" in " ".join(text.split())
     assert "every 1000 frames" in " ".join(text.split())
+
+
+@pytest.mark.parametrize("flag", ["--max-speed", "--max-turn-rate"])
+@pytest.mark.parametrize("value", ["-1", "0", "nan", "inf"])
+def test_a_limit_that_is_not_above_zero_is_refused_naming_the_flag(
+    setup, tmp_path, capsys, flag, value
+):
+    """--max-speed -1 is the user's mistake, not the data's: refused naming the flag,
+    before any work, leaving no OUT."""
+    _, cfg, data, _ = setup
+    out = tmp_path / "new" / "out"
+    assert main([*_argv(cfg, data, out), flag, value]) == 2
+    err = capsys.readouterr().err
+    assert flag in err and "above 0" in err and "Traceback" not in err
+    assert "exceeds" not in err and not (tmp_path / "new").exists()
+
+
+def test_the_python_api_names_the_limit_argument():
+    from torchratslam.errors import InputError
+    from torchratslam.readers.datasets import check_odometry
+
+    with pytest.raises(InputError, match=r"^max_speed = -1\.0: a limit must be"):
+        check_odometry(np.zeros(3), np.zeros(3), "odo.csv", max_speed=-1.0)
