@@ -31,5 +31,5 @@ def test_a_killed_simulates_hidden_temp_folder_is_removed_and_said(tmp_path, cap
     assert not stale.exists() and live.exists() and other.exists()
     assert any(str(stale) in r.getMessage() and "stopped" in r.getMessage() for r in caplog.records)
     assert sorted(p.name for p in tmp_path.iterdir()) == sorted(
-        [".ds.new-%d-4567cdef" % os.getppid(), ".other.new-1-0123abcd", "ds"]
+        [live.name, ".other.new-1-0123abcd", "ds"]
     )
