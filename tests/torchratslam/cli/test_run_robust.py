@@ -468,3 +468,26 @@ def test_a_map_of_fewer_than_three_poses_has_no_ate(setup, tmp_path, capsys):
     assert m["ate_frames"] == 1 and "needs 3" in m["ate_undefined"]
     assert "ATE undefined (1 of 2 frames have a map pose and ground truth; it needs 3)" in printed
     assert "ATE 0" not in printed and "ATE 7" not in printed
+
+
+def test_odometry_times_in_another_unit_than_the_ground_truth_are_refused(setup, tmp_path, capsys):
+    """Odometry times x 1e-9 with ground truth in seconds used to give "ATE 0.000 m vs
+    dead reckoning 0.000 m" (the tour squeezed into nanometres): refused in one line."""
+    _, cfg, data, _ = setup
+    part = _copy_data(data, tmp_path / "ds")
+    odo = part / "odometry.csv"
+    lines = odo.read_text().splitlines()
+    head = lines[0].split(",")
+    col = head.index("t")
+    rows = []
+    for line in lines[1:]:
+        cells = line.split(",")
+        cells[col] = repr(float(cells[col]) * 1e-9)
+        rows.append(",".join(cells))
+    odo.write_text("\n".join([lines[0], *rows]) + "\n")
+    out = tmp_path / "out"
+    capsys.readouterr()
+    assert main(_argv(cfg, part, out)) == 2
+    err = capsys.readouterr().err
+    assert "different time units" in err and "Traceback" not in err
+    assert not out.exists()
