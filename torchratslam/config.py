@@ -462,7 +462,10 @@ def _read_yaml(path: Path) -> dict[str, Any]:
         one_line = " ".join(str(exc).split())
         raise ConfigError(f"{path}: not valid YAML ({one_line})") from None
     if data is None:
-        return {}
+        raise ConfigError(
+            f"{path}: holds no parameters (an empty file); write the keys to change, or "
+            "'{}' for OpenRatSLAM's defaults"
+        )
     if not isinstance(data, dict):
         raise ConfigError(
             f"{path}: expected a mapping of parameter keys, got {type(data).__name__}"
@@ -482,20 +485,40 @@ def _read_openratslam_txt(path: Path) -> dict[str, Any]:
     parser = configparser.ConfigParser(
         inline_comment_prefixes=(";", "#"),
         comment_prefixes=(";", "#"),
-        strict=False,
+        strict=True,  # a key or section given twice is refused, as OpenRatSLAM's reader does
         interpolation=None,
     )
     parser.optionxform = str  # type: ignore[assignment,method-assign]  # keep key case
     try:
         parser.read_string(_read_text(path))
+    except configparser.DuplicateOptionError as exc:
+        raise ConfigError(
+            f"{path}: key {exc.option!r} appears twice in [{exc.section}] (line {exc.lineno}); "
+            "keep one"
+        ) from None
+    except configparser.DuplicateSectionError as exc:
+        raise ConfigError(
+            f"{path}: section [{exc.section}] appears twice (line {exc.lineno}); keep one"
+        ) from None
     except configparser.Error as exc:
         one_line = " ".join(str(exc).split())
         raise ConfigError(f"{path}: not a valid OpenRatSLAM config ({one_line})") from None
     flat: dict[str, Any] = {}
+    where: dict[str, str] = {}
     for section in ("general", "ratslam", "visual_odometry"):
         if parser.has_section(section):
             for key, value in parser.items(section):
-                flat[key] = value.strip().strip('"')
+                if key in flat:
+                    raise ConfigError(
+                        f"{path}: key {key!r} appears in both [{where[key]}] and "
+                        f"[{section}]; keep one"
+                    )
+                flat[key], where[key] = value.strip().strip('"'), section
+    if not flat:
+        raise ConfigError(
+            f"{path}: holds no parameters (no keys under [general], [ratslam] or "
+            "[visual_odometry]); write the keys to change"
+        )
     return flat
 
 

@@ -263,3 +263,24 @@ def test_a_key_given_twice_in_a_yaml_file_is_refused(tmp_path: Path):
     assert str(e.value) == f"{p}: key 'pc_dim_xy' appears twice (lines 1 and 3); keep one"
     p.write_text("pc_dim_xy: 15\nexp_loops: 3\n")  # each key once: loads
     assert load_config(p).pose_cells.pc_dim_xy == 15
+
+
+@pytest.mark.parametrize("text", ["", "\n\n", "# nothing but a comment\n"])
+def test_an_empty_yaml_config_is_refused_not_run_as_the_defaults(tmp_path, text):
+    p = tmp_path / "c.yaml"
+    p.write_text(text)
+    with pytest.raises(ConfigError, match=r"holds no parameters \(an empty file\)"):
+        load_config(p)
+    p.write_text("{}\n")  # the defaults, asked for
+    assert load_config(p) == load_config(None)
+
+
+def test_the_cli_refuses_an_empty_config_in_one_line(tmp_path, capsys):
+    from torchratslam.cli import main
+
+    p = tmp_path / "c.yaml"
+    p.write_text("")
+    out = tmp_path / "out"
+    assert main(["run", "--config", str(p), "--data", "sim:loop?frames=5", "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "holds no parameters" in err and "Traceback" not in err and not out.exists()

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import argparse
 import json
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -44,6 +45,11 @@ def register(subparsers: Any) -> argparse.ArgumentParser:
     )
     p.add_argument(
         "--out", required=True, help="output directory for the merged map, e.g. --out out/merged"
+    )
+    p.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="replace a map already in OUT (never --loaded or --partial), e.g. --overwrite",
     )
     p.add_argument(
         "--format",
@@ -118,6 +124,38 @@ def match_last_template(loaded: Any, partial: Any, config: Any) -> tuple[int, fl
     return tid, float(lv.relative_rad(int(offset))), float(err)
 
 
+def check_out(out: Path, inputs: dict[str, str], overwrite: bool) -> None:
+    """Refuse an OUT that is (or holds, or lies in) an input map, and a non-empty OUT
+    without ``overwrite``: a merge never rewrites its inputs nor a finished run's state.
+
+    Raises:
+        InputError: naming the flag.
+    """
+    from torchratslam.errors import InputError
+
+    paths = {flag: Path(value).resolve() for flag, value in inputs.items()}
+    if len(set(paths.values())) < len(paths):
+        raise InputError(
+            f"{' and '.join(inputs)} are the same map ({next(iter(inputs.values()))}); merging "
+            "a map with itself would only double it: give two different maps"
+        )
+    target = out.resolve()
+    for flag, value in inputs.items():
+        src = Path(value).resolve()
+        if target == src or src in target.parents or target in src.parents:
+            raise InputError(
+                f"--out {out} is the map given as {flag} {value}; a merge never rewrites "
+                "its inputs: choose another --out"
+            )
+    if out.exists() and not out.is_dir():
+        raise InputError(f"--out {out}: exists and is not a directory; choose another path")
+    if out.is_dir() and any(out.iterdir()) and not overwrite:
+        raise InputError(
+            f"--out {out} is not empty (it holds {next(iter(sorted(out.iterdir()))).name}); "
+            "choose another --out, or replace it with --overwrite"
+        )
+
+
 def main(args: argparse.Namespace) -> int:
     from torchratslam.maps.io import load_state
     from torchratslam.maps.merge import merge_maps
@@ -125,6 +163,7 @@ def main(args: argparse.Namespace) -> int:
     from torchratslam.maps.reference_format import write_reference
     from torchratslam.maps.running import apply_experience_map
 
+    check_out(Path(args.out), {"--loaded": args.loaded, "--partial": args.partial}, args.overwrite)
     config = load_config(args.config)
     loaded = load_state(args.loaded, config)
     partial = load_state(args.partial, config)

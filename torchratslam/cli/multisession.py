@@ -197,6 +197,7 @@ class _Running:
 
         from ratslam_graph.io import atomic_write_text
 
+        self.created = not self.path.parent.exists()
         self.path.parent.mkdir(parents=True, exist_ok=True)
         started = time.strftime("%Y-%m-%d %H:%M:%S")
         record = {"command": ["torchratslam", *sys.argv[1:]], "started": started}
@@ -204,8 +205,15 @@ class _Running:
         return self
 
     def __exit__(self, kind: Any, *rest: Any) -> None:
-        if kind is None:
+        from torchratslam.errors import ConfigError, InputError
+
+        # A finished run, or one refused for a bad input (nothing of it to resume), leaves
+        # no lock; a stopped or crashed run keeps it so the next command says so.
+        if kind is None or issubclass(kind, (InputError, ConfigError)):
             self.path.unlink(missing_ok=True)
+            if self.created and self.path.parent.is_dir():
+                if not any(self.path.parent.iterdir()):
+                    self.path.parent.rmdir()
 
 
 def parse_seeds(spec: str) -> list[int]:
@@ -213,12 +221,19 @@ def parse_seeds(spec: str) -> list[int]:
     from torchratslam.errors import ConfigError
 
     seeds: list[int] = []
+    backwards, lo, hi = False, 0, 0
     try:
         for part in spec.split(","):
             a, sep, b = part.strip().partition("-")
-            seeds += list(range(int(a), int(b) + 1)) if sep else [int(a)]
+            lo, hi = int(a), int(b) if sep else int(a)
+            backwards = hi < lo
+            if backwards:
+                break
+            seeds += list(range(lo, hi + 1))
     except ValueError:
         raise ConfigError(f"--seeds {spec!r}: expected A-B or a,b,c (e.g. 0-9)") from None
+    if backwards:
+        raise ConfigError(f"--seeds {spec!r}: {lo}-{hi} runs backwards; give A-B with A <= B")
     if not seeds:
         raise ConfigError(f"--seeds {spec!r}: no seeds")
     return seeds
@@ -295,6 +310,8 @@ def main(args: argparse.Namespace) -> int:
         args.merge_anchor = "template"
     if args.pc_shift_rotate:
         merge["pc_shift_rotate"] = True
+    if args.seeds is not None:
+        parse_seeds(args.seeds)  # a bad --seeds is refused before OUT is touched
     with _Running(Path(args.out), args.overwrite):
         if args.seeds is not None:
             return _seeds_main(args, overrides, merge)

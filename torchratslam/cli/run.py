@@ -222,6 +222,15 @@ def register(subparsers: Any) -> argparse.ArgumentParser:
     return p
 
 
+def _check_limits(args: argparse.Namespace) -> None:
+    """--max-speed / --max-turn-rate: a finite number above zero, or the flag is named."""
+    import math
+
+    for flag, value in (("--max-speed", args.max_speed), ("--max-turn-rate", args.max_turn_rate)):
+        if value is not None and not (math.isfinite(value) and value > 0):
+            raise InputError(f"{flag} {value:g}: a limit must be a finite number above 0")
+
+
 def _topics(args: argparse.Namespace, config: Any) -> tuple[str, str]:
     """Bag topics: the options, else the config's ``topic_root``, else the iRat's."""
     from torchratslam.experiments.run_dataset import bag_topics
@@ -240,6 +249,7 @@ def _overrides(items: list[str]) -> dict[str, str]:
 
 
 def main(args: argparse.Namespace) -> int:
+    _check_limits(args)
     from torchratslam.experiments.run_dataset import resume_run, run_dataset
     from torchratslam.experiments.run_options import RunOptions, RunSettings
     from torchratslam.experiments.run_outputs import summary_line

@@ -74,8 +74,8 @@ def map_ate(state: Any, gt: np.ndarray | None) -> tuple[float | None, str]:
 
     if gt is None:
         return None, "no ground truth"
-    if state.n_experiences < 2:
-        return None, "fewer than 2 experiences"
+    if state.n_experiences < 3:
+        return None, "fewer than 3 experiences (an ATE after a rigid alignment needs 3)"
     if np.ptp(state.exp_t) == 0:
         return None, "the map has no experience creation times (reference format)"
     truth = interpolate_groundtruth(gt, state.exp_t)
@@ -109,20 +109,26 @@ def compare_maps(
     for p, s in ((pa, sa), (pb, sb)):
         if s.n_experiences == 0:
             raise InputError(f"{p}: the map has no experiences to compare")
-    gt_src = str(groundtruth) if groundtruth is not None else (_run_data(pa) or _run_data(pb))
-    gt = None
-    if gt_src is not None:
-        gt = load_groundtruth(gt_src) if groundtruth is not None else _try_gt(gt_src)
-        if gt is None:
-            gt_src = None
+    # each map is judged against its own run's ground truth (or the one given for both)
+    given = load_groundtruth(str(groundtruth)) if groundtruth is not None else None
+    sources: dict[str, str | None] = {}
     out: dict[str, Any] = {"roles": ROLES}
     for key, p, s in (("a", pa, sa), ("b", pb, sb)):
+        src = str(groundtruth) if groundtruth is not None else _run_data(p)
+        gt = given if groundtruth is not None else (_try_gt(src) if src is not None else None)
+        sources[key] = src if gt is not None else None
         if gt is not None and s.n_experiences > 1 and np.ptp(s.exp_t) > 0:
-            check_groundtruth_covers(s.exp_t, s.exp_pose, gt, source=str(gt_src), what=str(p))
+            check_groundtruth_covers(s.exp_t, s.exp_pose, gt, source=str(src), what=str(p))
         ate, why = map_ate(s, gt)
         out[key] = {"path": str(p), "format": map_format(p), **s.summary(), "ate_rmse_m": ate}
+        out[key]["groundtruth"] = sources[key]
         if ate is None:
-            out[key]["ate_note"] = why
+            out[key]["ate_note"] = (
+                "no ground truth of its own (not a run's OUT): give --groundtruth"
+                if gt is None and groundtruth is None
+                else why
+            )
+    gt_src = sources["a"] or sources["b"]
     starts = libicp_starts(sa.exp_pose, sb.exp_pose)
     out["icp"] = compare_icp(sa.exp_pose, sb.exp_pose, starts=starts)
     out["icp"]["units"] = {

@@ -15,7 +15,7 @@ import io
 import json
 import logging
 import math
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -99,6 +99,8 @@ class RunMetrics:
         ate_frame_rmse_m: the ATE of ``tum_frame.txt``.
         ate_rmse_m: the map's ATE (with ground truth).
         dead_reckoning_ate_m: dead reckoning's ATE (with ground truth).
+        ate_frames: the frames with a ground-truth pose, which both ATEs are taken over
+            (after a rigid SE(2) alignment); under 3 the ATEs are None (undefined).
         merges: a multisession run's merges.
         unmerged: the stored maps that never merged with the run's map: per map its
             ``--load`` option (``map``) and where it was written (``written``).
@@ -133,6 +135,7 @@ class RunMetrics:
     dead_reckoning_ate_m: float | None = None
     merges: Any = None
     unmerged: list[dict[str, str]] | None = None
+    ate_frames: int | None = None
     input_warnings: list[str] | None = None
     partial: bool | None = None
     stopped_at_frame: int | None = None
@@ -141,7 +144,13 @@ class RunMetrics:
 
     def to_json(self) -> dict[str, Any]:
         """What metrics.json holds: the fields that are not None, but the scale summary."""
-        return {k: v for k, v in asdict(self).items() if v is not None and k != "scale"}
+        out = {k: v for k, v in asdict(self).items() if v is not None and k != "scale"}
+        if self.ate_frames is not None and self.ate_rmse_m is None:
+            out["ate_rmse_m"] = None  # undefined, and said why
+            out["ate_undefined"] = (
+                f"{self.ate_frames} frames have both a map pose and ground truth; an ATE needs 3"
+            )
+        return out
 
 
 def _csv_text(header: list[str], rows: np.ndarray, int_cols: tuple[int, ...]) -> str:
@@ -185,9 +194,10 @@ def _write_tables(slam: Any, out: Path) -> tuple[np.ndarray, np.ndarray]:
 
 def _groundtruth_errors(
     slam: Any, data: Any, traj: np.ndarray
-) -> tuple[np.ndarray | None, float | None, float | None]:
+) -> tuple[np.ndarray | None, float | None, float | None, int | None]:
     """The ground truth along the trajectory, the map's ATE and dead reckoning's ATE
-    (None where there is no ground truth)."""
+    (None where there is no ground truth, or fewer than 3 frames have it) and the
+    number of frames with ground truth the ATEs are taken over."""
     from torchratslam.eval.metrics import interpolate_groundtruth
 
     gt_xy = slam.groundtruth_poses()
@@ -195,11 +205,13 @@ def _groundtruth_errors(
     if gt_xy is None and gt_table is not None and len(gt_table) and traj.shape[0]:
         gt_xy = interpolate_groundtruth(gt_table, traj[:, 1])
     ate = dr = None
-    if gt_xy is not None and traj.shape[0] >= 2:
+    frames = None
+    if gt_xy is not None and traj.shape[0]:
         table = None if slam.groundtruth_poses() is not None else gt_table
         ate = slam.ate(table)
         dr = slam.dead_reckoning_ate(table)
-    return gt_xy, ate, dr
+        frames = slam.history.ate_frames(slam.experience_map.poses, table)
+    return gt_xy, ate, dr, frames
 
 
 def _jsonable(v: Any) -> Any:
@@ -296,12 +308,12 @@ def write_outputs(
         save_state(slam, out / STATE_DIR)
     Manifest(out).add([*OUTPUT_FILES, STATE_DIR])
     poses, traj = _write_tables(slam, out)
-    gt_xy, ate, dr = _groundtruth_errors(slam, data, traj)
+    gt_xy, ate, dr, ate_frames = _groundtruth_errors(slam, data, traj)
     unmerged = write_unmerged(slam, out, extras.loaded or (), partial=bool(info.get("partial")))
     if unmerged is not None:
         info["unmerged"] = unmerged
     info["input_warnings"] = list(getattr(data, "input_warnings", ())) or None
-    metrics = _metrics(slam, result, extras, ate, dr, info)
+    metrics = replace(_metrics(slam, result, extras, ate, dr, info), ate_frames=ate_frames)
     _write_figures(slam, out, poses, traj, gt_xy, data, extras.data)
     atomic_write_text(
         out / "metrics.json",
@@ -380,9 +392,16 @@ def summary_line(metrics: RunMetrics, out: Path) -> str:
         f"({m.fps:.1f} frames/s): {m.templates} templates, "
         f"{m.experiences} experiences, {m.links} links"
     )
+    if m.ate_rmse_m is None and m.ate_frames is not None:
+        line += (
+            f", ATE undefined ({m.ate_frames} of {m.frames} frames have a map pose and "
+            "ground truth; it needs 3)"
+        )
     if m.ate_rmse_m is not None:
         ate = m.ate_rmse_m
         line += f", ATE {ate:.3f} m" if math.isfinite(ate) else ""
+        if m.ate_frames is not None:
+            line += f" (SE(2)-aligned, over {m.ate_frames} of {m.frames} frames)"
         if m.ate_frame_rmse_m is not None:
             line += f" (per-frame pose {m.ate_frame_rmse_m:.3f} m)"
         dr = m.dead_reckoning_ate_m

@@ -16,6 +16,17 @@ _COLUMNS = 13
 _NO_POSE = (np.nan, np.nan, np.nan)
 
 
+# An ATE is undefined below this many poses with ground truth (a rigid SE(2) alignment
+# fits two poses exactly).
+MIN_ATE_POSES = 3
+
+
+def _inside(groundtruth: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """Which times lie inside the ground truth's time range (no clamped poses)."""
+    gt_t = np.asarray(groundtruth, dtype=np.float64)[:, 0]
+    return (t >= gt_t[0] - 1e-9) & (t <= gt_t[-1] + 1e-9)
+
+
 class History:
     """One row per processed frame: frame index, time, current experience, ground-truth
     pose (None when the frame had none), odometry ``(vtrans, vrot, dt)`` and pose-cell
@@ -122,30 +133,45 @@ class History:
         from torchratslam.eval.metrics import ate_rmse, interpolate_groundtruth
 
         traj = self.trajectory(poses)
-        if traj.shape[0] < 2:
-            return None
         gt = self.groundtruth_poses()
-        if groundtruth is not None:
+        covered = np.ones(traj.shape[0], dtype=bool)
+        if groundtruth is not None and traj.shape[0]:
             gt = interpolate_groundtruth(groundtruth, traj[:, 1])
+            covered = _inside(groundtruth, traj[:, 1])
         if gt is None:
             return None
-        ok = np.isfinite(traj[:, 3])
+        ok = np.isfinite(traj[:, 3]) & covered
+        if int(ok.sum()) < MIN_ATE_POSES:
+            return None  # an SE(2) alignment of fewer poses says nothing
         return ate_rmse(traj[ok, 3:5], gt[ok, :2])
+
+    def ate_frames(self, poses: np.ndarray, groundtruth: np.ndarray | None = None) -> int:
+        """How many frames :meth:`ate` is taken over: those with a map pose and a
+        ground-truth pose (inside ``groundtruth``'s time range when given)."""
+        traj = self.trajectory(poses)
+        if traj.shape[0] == 0:
+            return 0
+        ok = np.isfinite(traj[:, 3])
+        if groundtruth is not None:
+            ok &= _inside(groundtruth, traj[:, 1])
+        elif self.groundtruth_poses() is None:
+            return 0
+        return int(ok.sum())
 
     def dead_reckoning_ate(self, groundtruth: np.ndarray | None = None) -> float | None:
         """ATE (m) of the integrated odometry alone (``groundtruth`` as in :meth:`ate`)."""
         from torchratslam.eval.metrics import ate_rmse, dead_reckoning, interpolate_groundtruth
 
         odo = self.odometry_log()
-        if odo.shape[0] < 2:
-            return None
         gt = self.groundtruth_poses()
-        if groundtruth is not None:
+        covered = np.ones(odo.shape[0], dtype=bool)
+        if groundtruth is not None and odo.shape[0]:
             gt = interpolate_groundtruth(groundtruth, self.times())
-        if gt is None:
+            covered = _inside(groundtruth, self.times())
+        if gt is None or int(covered.sum()) < MIN_ATE_POSES:
             return None
         dr = dead_reckoning(odo[:, 0], odo[:, 1], odo[:, 2])
-        return ate_rmse(dr[:, :2], gt[:, :2])
+        return ate_rmse(dr[covered, :2], gt[covered, :2])
 
     # ------------------------------------------------------------------ edits
     def remap_experiences(self, old_to_new: np.ndarray) -> None:

@@ -22,6 +22,7 @@ from ratslam_graph.messages import Action, ActionKind
 from torchratslam.config import RatSLAMConfig
 from torchratslam.errors import InputError
 from torchratslam.messages import Frame, SessionState, ViewMatch
+from torchratslam.pipeline.checks import as_config, check_device, check_odometry_step
 from torchratslam.pipeline.history import History
 from torchratslam.pipeline.results import RunResult, StepResult
 from torchratslam.pipeline.runner import RunProgress, open_frames, parked_gc
@@ -85,7 +86,7 @@ class RatSLAM:
 
     def __init__(
         self,
-        config: RatSLAMConfig | None = None,
+        config: RatSLAMConfig | str | Path | dict[str, Any] | None = None,
         *,
         local_view: LocalViewModule | str | type | None = None,
         pose_cells: PoseCellModule | str | type | None = None,
@@ -95,7 +96,8 @@ class RatSLAM:
         device: torch.device | str | None = None,
         pipelined: bool = False,
     ) -> None:
-        self.config = config if config is not None else RatSLAMConfig()
+        self.config = as_config(config)
+        check_device(device)
         general = self.config.general
         if dtype is None:
             dtype = torch.float64 if general.dtype == "float64" else torch.float32
@@ -322,7 +324,7 @@ class RatSLAM:
             vtrans, vrot, dt = 0.0, 0.0, 0.0
             t = self._last_t + 1.0 / self.config.visual_odometry.camera_hz
         else:
-            vtrans, vrot, dt = (float(v) for v in odometry)
+            vtrans, vrot, dt = check_odometry_step(odometry)
             t = self._last_t + dt
         t = t if self.frame_index else 0.0
         frame = Frame(self.frame_index, t, np.asarray(image), vtrans=vtrans, vrot=vrot, dt=dt)

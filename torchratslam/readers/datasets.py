@@ -137,6 +137,9 @@ def check_odometry(
     Raises:
         InputError: naming the line, the value and the limit.
     """
+    for arg, limit in (("max_speed", max_speed), ("max_turn_rate", max_turn_rate)):
+        if not (np.isfinite(limit) and limit > 0):
+            raise InputError(f"{arg} = {limit!r}: a limit must be a finite number above 0")
     for name, v, limit, unit, option in (
         ("vtrans", vtrans, max_speed, "m/s", "--max-speed"),
         ("vrot", vrot, max_turn_rate, "rad/s", "--max-turn-rate"),
@@ -186,6 +189,13 @@ def check_time_bases(t: np.ndarray, gt: np.ndarray | None, frames: str, gt_sourc
     if gt is None or gt.shape[0] == 0 or t.size == 0:
         return
     lo, hi = float(gt[0, 0]), float(gt[-1, 0])
+    span, gt_span = float(t[-1] - t[0]), hi - lo
+    if t.size >= 3 and 0 < span < 1e-6 * gt_span:
+        raise InputError(
+            f"{gt_source}: the {t.size} frame times of {frames} span {span:.3g} s against "
+            f"the ground truth's {gt_span:.6g} s: the files use different time units (e.g. "
+            "nanoseconds against seconds); give both in seconds"
+        )
     inside = (t >= lo - 1e-9) & (t <= hi + 1e-9)
     frac = float(inside.mean())
     if frac < 0.5:

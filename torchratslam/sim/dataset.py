@@ -20,6 +20,7 @@ A dataset directory (the reader format) holds::
 from __future__ import annotations
 
 import json
+import logging
 import os
 import shutil
 from pathlib import Path
@@ -37,6 +38,8 @@ from torchratslam.sim.tours import TOURS, get_tour
 __all__ = ["FORMAT_VERSION", "open_sim", "parse_sim_spec", "write_dataset"]
 
 FORMAT_VERSION = 1
+
+log = logging.getLogger(__name__)
 
 
 def parse_sim_spec(spec: str) -> tuple[str, str | None, dict]:
@@ -99,6 +102,44 @@ def _camera_meta(session: Session) -> dict:
     }
 
 
+def _remove_stale_temps(out: Path) -> None:
+    """Remove the hidden temp folders (``.NAME.new-PID-RANDOM``) that an earlier
+    ``write_dataset`` into ``out`` left when it was killed (its process is gone), saying
+    so; a live writer's folder is left alone."""
+    import re
+    import shutil
+
+    pattern = re.compile(rf"^\.{re.escape(out.name)}\.new-(\d+)-[0-9a-f]+$")
+    if not out.parent.is_dir():
+        return
+    for entry in sorted(out.parent.iterdir()):
+        m = pattern.match(entry.name)
+        if m is None or not entry.is_dir() or _alive(int(m.group(1))):
+            continue
+        size = sum(f.stat().st_size for f in entry.rglob("*") if f.is_file())
+        shutil.rmtree(entry, ignore_errors=True)
+        log.warning(
+            "removed %s (%.1f MB), left by a simulate into %s that was stopped",
+            entry,
+            size / 1e6,
+            out,
+        )
+
+
+def _alive(pid: int) -> bool:
+    import os
+
+    if pid == os.getpid():
+        return True
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except OSError:
+        return True  # another user's process: alive
+    return True
+
+
 def write_dataset(
     session: Session, out_dir: str | os.PathLike, *, overwrite: bool = False, progress: bool = False
 ) -> Path:
@@ -134,6 +175,7 @@ def write_dataset(
         # --overwrite replaces only a directory this project wrote (its manifest)
         Manifest(out).check_overwrite("overwrite it")
     make_dirs(out.parent)
+    _remove_stale_temps(out)
     tmp = unique_name(out, "new")
     tmp.mkdir()
     try:

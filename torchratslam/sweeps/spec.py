@@ -30,6 +30,7 @@ from __future__ import annotations
 import hashlib
 import itertools
 import json
+import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -147,6 +148,8 @@ def parse_values(key: str, spec: Any, source: str = "sweep") -> list[Any]:
             raise ConfigError(f"{where}: start, stop must be numbers and num an integer") from None
         if num < 1:
             raise ConfigError(f"{where}: num must be >= 1, got {num}")
+        if num > MAX_RUNS:
+            raise ConfigError(f"{where}: num = {num} values is more than a sweep runs ({MAX_RUNS})")
         log = bool(spec.get("log", False))
         if log and (start <= 0 or stop <= 0):
             raise ConfigError(f"{where}: log spacing needs start and stop > 0")
@@ -253,6 +256,7 @@ def from_dict(
                 f"{source}: unknown backend(s) {bad or blist} (valid: {', '.join(BACKENDS)})"
             )
         backends = tuple(str(b) for b in blist)
+    _check_size(parameters, mode, len(datasets) * len(seeds_list) * len(backends), source)
     spec = SweepSpec(
         base=base,
         fixed=fixed,
@@ -266,6 +270,23 @@ def from_dict(
     )
     _validate(spec)
     return spec
+
+
+# A sweep of more runs than this is refused at once (before any config is read).
+MAX_RUNS = 100_000
+
+
+def _check_size(parameters: dict[str, Any], mode: str, per_combination: int, source: str) -> None:
+    """Refuse a sweep of more than MAX_RUNS runs, counted without expanding it."""
+    sizes = [len(v) for v in parameters.values()]
+    combos = (min(sizes) if mode == "list" else math.prod(sizes)) if sizes else 1
+    total = combos * per_combination
+    if total > MAX_RUNS:
+        raise ConfigError(
+            f"{source}: {total:.3g} runs ({' x '.join(map(str, sizes))} values"
+            f"{f' x {per_combination} datasets/seeds/backends' if per_combination > 1 else ''}"
+            f"); a sweep runs at most {MAX_RUNS}: use fewer values"
+        )
 
 
 def _validate(spec: SweepSpec) -> None:

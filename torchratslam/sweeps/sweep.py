@@ -191,7 +191,15 @@ def sweep(
     rows: dict[str, dict[str, Any]] = {}
     if resume and table is not None and table.exists():
         wanted = {r.run_id: r for r in runs}
-        for row in read_table(table):
+        finished = read_table(table)
+        others = {str(row.get("run_id")) for row in finished} - set(wanted)
+        if others:
+            raise InputError(
+                f"{table} holds {len(others)} runs of another sweep, which resuming this "
+                "one would drop; choose another out folder, or start again with "
+                "--overwrite (overwrite=True) to replace it"
+            )
+        for row in finished:
             rid = str(row.get("run_id"))
             if rid in wanted and (row.get("status") == "ok" or not retry_failed):
                 row["index"] = wanted[rid].index

@@ -242,3 +242,29 @@ def test_multisession_refuses_an_out_holding_a_run_that_did_not_finish(tmp_path,
     err = capsys.readouterr().err
     assert "did not finish" in err and "--overwrite" in err
     assert sorted(p.name for p in out.iterdir()) == ["running.json"]
+
+
+@pytest.mark.parametrize(
+    "bad, message",
+    [(["--seeds", "9-3"], "runs backwards"), (["--tour", "sim:no_such_tour"], "no_such_tour")],
+)
+@pytest.mark.parametrize("existing", [False, True])
+def test_a_refused_multisession_leaves_out_as_it_was(tmp_path, capsys, bad, message, existing):
+    """A multisession refused for a bad argument leaves no running.json (nor an OUT it
+    made), so the corrected command is not refused as a run that did not finish."""
+    out = tmp_path / "ms"
+    if existing:
+        out.mkdir()
+        (out / "notes.txt").write_text("mine")
+    argv = ["multisession", "--tour", "sim:virtual_tour", "--out", str(out), "--max-frames", "5"]
+    assert main([*argv, *bad]) == 2
+    err = capsys.readouterr().err
+    assert message in err and "Traceback" not in err
+    if existing:
+        assert sorted(p.name for p in out.iterdir()) == ["notes.txt"]
+    else:
+        assert not out.exists()
+    # the corrected command is not refused as "a multisession run that did not finish"
+    from torchratslam.cli import multisession
+
+    multisession._Running(out, overwrite=False)

@@ -55,6 +55,9 @@ def test_a_is_moved_onto_b_and_json_goes_to_a_file(small_run, tmp_path, capsys):
     assert "LibICP residual" in text and "m^2" in text and "ICP RMSE" in text
     assert "(reference)" in text and "(native)" in text and "start rotations" in text
     assert main([*argv, "--json", str(js)]) == 0
+    rep = json.loads(js.read_text())  # no run of its own: judged against no other's
+    assert rep["a"]["ate_rmse_m"] is None and "--groundtruth" in rep["a"]["ate_note"]
+    assert main([*argv, "--json", str(js), "--groundtruth", small_run.data]) == 0
     rep = json.loads(js.read_text())
     assert rep["a"]["ate_rmse_m"] is None and "creation times" in rep["a"]["ate_note"]
     assert rep["icp"]["libicp_mse_m2"] < 1e-20  # the same positions
@@ -73,3 +76,24 @@ def test_ground_truth_of_another_dataset_is_refused(small_run, capsys):
     line = capsys.readouterr().err.splitlines()[0]  # one line (then the --debug hint)
     assert "sim:virtual_tour" in line and "ground truth" in line and "[InputError]" in line
     assert main(["compare-maps", str(out), str(out), "--groundtruth", small_run.data]) == 0
+
+
+def test_each_run_is_judged_against_its_own_ground_truth(small_run, tmp_path, capsys):
+    """compare-maps A B, two runs of different data: B's ATE is taken against B's own
+    ground truth (it used to be judged against A's)."""
+    from torchratslam.experiments.compare_maps import _try_gt, map_ate
+
+    a = small_run.out
+    b = tmp_path / "b"
+    data_b = "sim:loop?laps=1&frames=30"
+    argv = ["run", "--config", str(small_run.config), "--data", data_b, "--out", str(b)]
+    assert main([*argv, "--no-progress"]) == 0
+    js = tmp_path / "cmp.json"
+    capsys.readouterr()
+    assert main(["compare-maps", str(a), str(b), "--json", str(js)]) == 0
+    rep = json.loads(js.read_text())
+    assert rep["b"]["groundtruth"] == data_b
+    want, _ = map_ate(load_state(b), _try_gt(data_b))
+    assert rep["b"]["ate_rmse_m"] == pytest.approx(want, rel=1e-12)
+    wrong, _ = map_ate(load_state(b), _try_gt(rep["a"]["groundtruth"]))
+    assert abs(rep["b"]["ate_rmse_m"] - wrong) > 1e-6

@@ -98,3 +98,60 @@ def test_convert_says_what_it_changed_and_when_a_save_has_no_templates(small_run
     n = load_state(out).n_templates
     assert f"no templates (the source has no localviewcells.txt; only {n} template " in text
     assert f": {n} templates" not in text
+
+
+def _tree(root):
+    return {p.relative_to(root): p.read_bytes() for p in sorted(root.rglob("*")) if p.is_file()}
+
+
+def test_merge_never_rewrites_its_inputs_nor_a_finished_runs_state(small_run, capsys):
+    """merge --loaded M --partial P --out M, --out RUN/state and a non-empty --out are
+    refused in one line naming the flag; nothing in the run changes."""
+    root, out = small_run.out.parent, small_run.out
+    assert main(["convert", str(out), str(root / "m"), "--to", "native"]) == 0
+    assert main(["convert", str(out), str(root / "p"), "--to", "native"]) == 0
+    capsys.readouterr()
+    before = _tree(root)
+    cfg = ["--config", str(small_run.config)]
+    cases = [
+        (
+            ["--loaded", str(root / "m"), "--partial", str(root / "p"), "--out", str(root / "m")],
+            "is the map given as --loaded",
+        ),
+        (
+            ["--loaded", str(root / "m"), "--partial", str(root / "p"), "--out", str(root / "p")],
+            "is the map given as --partial",
+        ),
+        (
+            ["--loaded", str(out), "--partial", str(root / "p"), "--out", str(out / "state")],
+            "is the map given as --loaded",
+        ),
+        (
+            [
+                "--loaded",
+                str(root / "m"),
+                "--partial",
+                str(root / "p"),
+                "--out",
+                str(out / "state"),
+            ],
+            "not empty",
+        ),
+    ]
+    for argv, message in cases:
+        assert main(["merge", *cfg, *argv]) == 2
+        err = capsys.readouterr().err
+        assert message in err and "Traceback" not in err, err
+        assert sum("error:" in line for line in err.splitlines()) == 1
+    assert _tree(root) == before
+
+
+def test_merging_a_map_with_itself_is_refused(small_run, capsys):
+    """merge --loaded M --partial M would double the map (25 -> 49 experiences): refused."""
+    root, out = small_run.out.parent, small_run.out
+    before = _tree(root)
+    argv = ["merge", "--config", str(small_run.config), "--loaded", str(out)]
+    assert main([*argv, "--partial", str(out), "--out", str(root / "x")]) == 2
+    err = capsys.readouterr().err
+    assert "--loaded and --partial are the same map" in err and "Traceback" not in err
+    assert _tree(root) == before and not (root / "x").exists()

@@ -411,3 +411,103 @@ def test_run_help_says_what_run_does_and_shows_the_required_options(capsys):
     assert "files in it are replaced" not in text
     assert "replaces only the files it wrote" in " ".join(text.split())
     assert "every 1000 frames" in " ".join(text.split())
+
+
+@pytest.mark.parametrize("flag", ["--max-speed", "--max-turn-rate"])
+@pytest.mark.parametrize("value", ["-1", "0", "nan", "inf"])
+def test_a_limit_that_is_not_above_zero_is_refused_naming_the_flag(
+    setup, tmp_path, capsys, flag, value
+):
+    """--max-speed -1 is the user's mistake, not the data's: refused naming the flag,
+    before any work, leaving no OUT."""
+    _, cfg, data, _ = setup
+    out = tmp_path / "new" / "out"
+    assert main([*_argv(cfg, data, out), flag, value]) == 2
+    err = capsys.readouterr().err
+    assert flag in err and "above 0" in err and "Traceback" not in err
+    assert "exceeds" not in err and not (tmp_path / "new").exists()
+
+
+def test_the_python_api_names_the_limit_argument():
+    from torchratslam.errors import InputError
+    from torchratslam.readers.datasets import check_odometry
+
+    with pytest.raises(InputError, match=r"^max_speed = -1\.0: a limit must be"):
+        check_odometry(np.zeros(3), np.zeros(3), "odo.csv", max_speed=-1.0)
+
+
+def _ate_over(traj_csv, gt, frames):
+    """The ATE written out by hand: SE(2) (Kabsch) fit of the trajectory's experience
+    positions to the ground truth on the given frames, then the RMS residual."""
+    rows = np.loadtxt(traj_csv, delimiter=",", skiprows=1)[frames]
+    rows = rows[np.isfinite(rows[:, 3])]  # frames before the first experience
+    est = rows[:, 3:5]
+    ref = np.stack([np.interp(rows[:, 1], gt[:, 0], gt[:, k]) for k in (1, 2)], axis=1)
+    a, b = est - est.mean(0), ref - ref.mean(0)
+    u, _, vt = np.linalg.svd(a.T @ b)
+    d = np.sign(np.linalg.det(u @ vt))
+    rot = (u @ np.diag([1.0, d]) @ vt).T
+    res = (rot @ a.T).T - b
+    return float(np.sqrt((res**2).sum(1).mean()))
+
+
+def test_partial_ground_truth_gives_the_ate_over_the_frames_it_covers(setup, tmp_path, capsys):
+    """groundtruth.csv covering 24 of 40 frames: the ATE is taken over those 24 frames
+    (no pose clamped to the last one), and metrics.json and the printed line say so."""
+    _, cfg, data, full = setup
+    part = _copy_data(data, tmp_path / "ds")
+    gt_path = part / "groundtruth.csv"
+    lines = gt_path.read_text().splitlines()
+    gt = np.loadtxt(data / "groundtruth.csv", delimiter=",", skiprows=1)
+    times = np.loadtxt(full / "trajectory.csv", delimiter=",", skiprows=1)[:, 1]
+    keep = int(np.searchsorted(gt[:, 0], times[23], side="right"))
+    gt_path.write_text("\n".join(lines[: 1 + keep]) + "\n")
+    covered = np.flatnonzero(times <= gt[keep - 1, 0] + 1e-9)
+    assert covered.size == 24  # frame 0 has no experience yet: 23 map poses
+    capsys.readouterr()
+    out = tmp_path / "out"
+    assert main(_argv(cfg, part, out)) == 0
+    printed = capsys.readouterr().out
+    m = json.loads((out / "metrics.json").read_text())
+    assert m["ate_frames"] == 23
+    want = _ate_over(out / "trajectory.csv", gt, covered)
+    assert m["ate_rmse_m"] == pytest.approx(want, rel=1e-9, abs=1e-12)
+    assert "SE(2)-aligned, over 23 of 40 frames" in printed
+    clamped = _ate_over(out / "trajectory.csv", gt[:keep], np.arange(40))
+    assert abs(m["ate_rmse_m"] - clamped) > 1e-6  # what it used to report
+
+
+def test_a_map_of_fewer_than_three_poses_has_no_ate(setup, tmp_path, capsys):
+    _, cfg, data, _ = setup
+    out = tmp_path / "out"
+    capsys.readouterr()
+    assert main([*_argv(cfg, data, out), "--max-frames", "2"]) == 0
+    printed = capsys.readouterr().out
+    m = json.loads((out / "metrics.json").read_text())
+    assert m["ate_rmse_m"] is None and m.get("dead_reckoning_ate_m") is None
+    assert m["ate_frames"] == 1 and "needs 3" in m["ate_undefined"]
+    assert "ATE undefined (1 of 2 frames have a map pose and ground truth; it needs 3)" in printed
+    assert "ATE 0" not in printed and "ATE 7" not in printed
+
+
+def test_odometry_times_in_another_unit_than_the_ground_truth_are_refused(setup, tmp_path, capsys):
+    """Odometry times x 1e-9 with ground truth in seconds used to give "ATE 0.000 m vs
+    dead reckoning 0.000 m" (the tour squeezed into nanometres): refused in one line."""
+    _, cfg, data, _ = setup
+    part = _copy_data(data, tmp_path / "ds")
+    odo = part / "odometry.csv"
+    lines = odo.read_text().splitlines()
+    head = lines[0].split(",")
+    col = head.index("t")
+    rows = []
+    for line in lines[1:]:
+        cells = line.split(",")
+        cells[col] = repr(float(cells[col]) * 1e-9)
+        rows.append(",".join(cells))
+    odo.write_text("\n".join([lines[0], *rows]) + "\n")
+    out = tmp_path / "out"
+    capsys.readouterr()
+    assert main(_argv(cfg, part, out)) == 2
+    err = capsys.readouterr().err
+    assert "different time units" in err and "Traceback" not in err
+    assert not out.exists()

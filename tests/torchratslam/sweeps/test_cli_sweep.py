@@ -63,3 +63,57 @@ def test_sweep_command_writes_the_table(tmp_path, capsys):
     out = capsys.readouterr().out
     assert "2 runs (0 failed)" in out and "best ATE" in out
     assert (tmp_path / "o" / "results.csv").read_text().count("\n") == 3
+
+
+def test_resume_with_another_grid_keeps_the_first_sweeps_rows(tmp_path, capsys):
+    """sweep A --out D, then sweep B --out D --resume (B another grid) refuses in one line
+    and leaves A's finished rows in results.csv byte for byte."""
+    head = "base: virtual_tour\nset: {pc_dim_xy: 21}\ndatasets: ['sim:loop?frames=8&lasers=0']\n"
+    a, b = tmp_path / "a.yaml", tmp_path / "b.yaml"
+    a.write_text(head + "parameters: {exp_loops: [1, 3]}\n")
+    b.write_text(head + "parameters: {exp_loops: [2, 4]}\n")
+    out = tmp_path / "d"
+    common = ["--out", str(out), "--workers", "1", "--no-progress", "--no-figures"]
+    assert main(["sweep", str(a), *common]) == 0
+    table = (out / "results.csv").read_bytes()
+    capsys.readouterr()
+    code = main(["sweep", str(b), *common, "--resume"])
+    err = capsys.readouterr().err
+    assert code == 2
+    assert "2 runs of another sweep" in err and "Traceback" not in err
+    assert sum("error:" in line for line in err.splitlines()) == 1
+    assert (out / "results.csv").read_bytes() == table
+
+
+def test_a_huge_grid_is_refused_at_once_on_its_run_count(tmp_path, capsys):
+    """1e6 x 1e6 values used to spin silently (every run's config read before anything
+    was shown): refused at once, naming the run count, leaving no OUT."""
+    import time
+
+    f = tmp_path / "huge.yaml"
+    f.write_text(
+        "parameters:\n"
+        "  vt_match_threshold: {start: 0.01, stop: 0.2, num: 1000000}\n"
+        "  pc_vt_inject_energy: {start: 0.05, stop: 0.2, num: 1000000}\n"
+    )
+    out = tmp_path / "o"
+    t0 = time.perf_counter()
+    assert main(["sweep", str(f), "--out", str(out), "--no-progress"]) == 2
+    assert time.perf_counter() - t0 < 20
+    err = capsys.readouterr().err
+    assert "num = 1000000 values is more than a sweep runs (100000)" in err
+    assert "Traceback" not in err and not out.exists()
+    f.write_text(  # each list small enough, the grid not
+        "parameters:\n"
+        "  vt_match_threshold: {start: 0.01, stop: 0.2, num: 1000}\n"
+        "  pc_vt_inject_energy: {start: 0.05, stop: 0.2, num: 1000}\n"
+    )
+    assert main(["sweep", str(f), "--out", str(out), "--no-progress"]) == 2
+    err = capsys.readouterr().err
+    assert "1e+06 runs (1000 x 1000 values)" in err and "at most 100000" in err
+    assert not out.exists()
+    f.write_text(
+        "parameters:\n  vt_match_threshold: {start: 0.01, stop: 0.2, num: 1000000000000}\n"
+    )
+    assert main(["sweep", str(f), "--out", str(out), "--no-progress"]) == 2
+    assert "num = 1000000000000 values" in capsys.readouterr().err
