@@ -20,7 +20,6 @@ is computed once from the images and both implementations read it:
 from __future__ import annotations
 
 import dataclasses
-import subprocess
 import tempfile
 from pathlib import Path
 from typing import Any
@@ -37,6 +36,7 @@ from torchratslam.experiments.reproduce.xratslam import (
     _run,
     cpp_loop_seconds,
     find_openratslam_build,
+    run_driver,
 )
 
 __all__ = ["EXPERIMENTS", "QUICK_FRAMES"]
@@ -66,15 +66,7 @@ def _cpp(build: Path, session: Any, frames: list, config: Any, work: Path) -> di
     rows = ["t,vtrans,vrot"] + [f"{f.t!r},{f.vtrans!r},{f.vrot!r}" for f in frames]
     (data / "odometry.csv").write_text("\n".join(rows) + "\n")
     (data / "config.txt").write_text(to_openratslam_txt(config))
-    out = work / "cpp"
-    out.mkdir()
-    with open(out / "stdout.log", "w") as fh:
-        subprocess.run(
-            [str(build / "ratslam_driver"), str(data / "config.txt"), str(data), str(out)],
-            check=True,
-            stdout=fh,
-            stderr=subprocess.DEVNULL,
-        )
+    out = run_driver(build, data, work)
     wall = cpp_loop_seconds(out)
     fr = _read_csv(out / "frames.csv")
     exp = _read_csv(out / "experiences.csv")

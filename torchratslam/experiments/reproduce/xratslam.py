@@ -141,11 +141,9 @@ def cpp_loop_seconds(out: Path) -> float:
     raise InputError(f"{out / 'summary.txt'} has no loop_wall_s")
 
 
-def _cpp_side_by_side(build: Path, session: Any, config_txt: str, work: Path) -> _CppRun:
-    from torchratslam.sim import write_dataset
-
-    data = write_dataset(session, work / "data", progress=False)
-    (data / "config.txt").write_text(config_txt)
+def run_driver(build: Path, data: Path, work: Path) -> Path:
+    """OpenRatSLAM's ``ratslam_driver`` on the dataset folder ``data`` (its ``config.txt``
+    read), writing into ``work/cpp`` (returned); its stdout kept in ``stdout.log``."""
     out = work / "cpp"
     out.mkdir()
     with open(out / "stdout.log", "w") as fh:
@@ -155,6 +153,15 @@ def _cpp_side_by_side(build: Path, session: Any, config_txt: str, work: Path) ->
             stdout=fh,
             stderr=subprocess.DEVNULL,
         )
+    return out
+
+
+def _cpp_side_by_side(build: Path, session: Any, config_txt: str, work: Path) -> _CppRun:
+    from torchratslam.sim import write_dataset
+
+    data = write_dataset(session, work / "data", progress=False)
+    (data / "config.txt").write_text(config_txt)
+    out = run_driver(build, data, work)
     wall = cpp_loop_seconds(out)
     fr = _read_csv(out / "frames.csv")
     exp = _read_csv(out / "experiences.csv")
