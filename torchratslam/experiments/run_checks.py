@@ -12,7 +12,7 @@ from ratslam_graph.atomic import Manifest
 from torchratslam.errors import InputError
 from torchratslam.experiments.run_options import RunOptions
 from torchratslam.experiments.run_outputs import OUTPUT_FILES, TUM_FILES, UNMERGED_DIR
-from torchratslam.experiments.run_state import RUN_RECORD, STATE_DIR
+from torchratslam.experiments.run_state import LOADED_DIR, RUN_RECORD, STATE_DIR
 
 __all__ = ["check_applicable", "check_counts", "check_device", "check_out"]
 
@@ -120,7 +120,7 @@ def check_out(out: Path, *, resume: bool) -> None:
             if (out / name).is_dir():
                 raise InputError(f"{out / name} is a directory (a file goes there); move it away")
         own = Manifest(out).entries()
-        names = (*OUTPUT_FILES, *TUM_FILES, STATE_DIR, RUN_RECORD, UNMERGED_DIR)
+        names = (*OUTPUT_FILES, *TUM_FILES, STATE_DIR, RUN_RECORD, UNMERGED_DIR, LOADED_DIR)
         theirs = [n for n in names if (out / n).exists()]
         theirs = [n for n in theirs if n not in own]
         if theirs and not resume:

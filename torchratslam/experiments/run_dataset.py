@@ -357,10 +357,10 @@ def _open(
         "pipelined": opts.pipelined,
     }
     if opts.load:
-        from torchratslam.maps.io import load_state
         from torchratslam.multisession.session import MultiSessionRatSLAM
 
-        slam: Any = MultiSessionRatSLAM(config, [load_state(p) for p in opts.load], **kwargs)
+        stored = run_state.loaded_maps(out, tuple(opts.load), resume=resume)
+        slam: Any = MultiSessionRatSLAM(config, stored, **kwargs)
     else:
         slam = RatSLAM(config, **kwargs)
     skip = 0
@@ -435,6 +435,13 @@ def _run(
             recorder.on_step(r)
         if not status["wrote"]:  # OUT now holds a run that can be resumed
             status["wrote"] = True
+            if opts.load:  # a resumed run reads its stored maps from OUT, not from --load
+                _saving(
+                    lambda: run_state.keep_loaded(slam, out, replace=not resume),
+                    out,
+                    out / run_state.LOADED_DIR,
+                    saved["frame"],
+                )
             _saving(lambda: write_record(out, record), out, out / RUN_RECORD, saved["frame"])
         if every and slam.frame_index % every == 0:
             info = {
@@ -516,6 +523,7 @@ def _run(
         write_record(out, dataclasses.replace(record, finished=True))  # last of all
     except OSError as exc:
         raise _save_error(exc, out, out, saved["frame"]) from None
+    run_state.drop_loaded(out)  # a finished run cannot be resumed: its copies are done with
     return metrics
 
 

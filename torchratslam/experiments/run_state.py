@@ -24,12 +24,16 @@ from torchratslam.experiments.run_options import RunOptions
 
 __all__ = [
     "HISTORY",
+    "LOADED_DIR",
     "RUN_RECORD",
     "STATE_DIR",
     "RunRecord",
     "SaveError",
+    "drop_loaded",
     "finished_run",
     "json_default",
+    "keep_loaded",
+    "loaded_maps",
     "new_run_id",
     "read_record",
     "restore_history",
@@ -42,6 +46,9 @@ __all__ = [
 STATE_DIR = "state"
 RUN_RECORD = "run.json"
 HISTORY = "history.npz"
+LOADED_DIR = "loaded"
+"""OUT/loaded/mapK: a copy of the K-th ``--load`` map, kept while the run can be resumed
+(a resumed run reads its stored maps there, so the originals may move or go)."""
 
 
 @dataclass(frozen=True)
@@ -139,6 +146,59 @@ def restore_multisession(slam: Any, info: dict[str, Any]) -> None:
         return
     slam.pending = [int(k) for k in saved.get("pending", [])]
     slam.merges = list(saved.get("merges", []))
+
+
+def keep_loaded(slam: Any, out: Path, *, replace: bool) -> None:
+    """Copy a ``--load`` run's stored maps to OUT/loaded/mapK (each atomically, recorded in
+    OUT's manifest first), so that a resumed run needs only OUT; ``replace`` False keeps
+    the copies already there."""
+    from torchratslam.maps.native import save_map
+
+    stored = getattr(slam, "stored", None)
+    if not stored:
+        return
+    Manifest(out).add([LOADED_DIR])
+    (out / LOADED_DIR).mkdir(exist_ok=True)
+    for k, state in enumerate(stored):
+        target = out / LOADED_DIR / f"map{k}"
+        if replace or not target.is_dir():
+            save_map(state, target)
+
+
+def drop_loaded(out: Path) -> None:
+    """Remove OUT/loaded once the run has finished (nothing is left to resume)."""
+    import shutil
+
+    if LOADED_DIR in Manifest(out).entries() and (out / LOADED_DIR).is_dir():
+        shutil.rmtree(out / LOADED_DIR, ignore_errors=True)
+
+
+def loaded_maps(out: Path, paths: tuple[str, ...], *, resume: bool) -> list[Any]:
+    """The stored maps of a ``--load`` run: on ``resume`` the copies OUT/loaded holds
+    (named by their original paths, as the run began), else the maps at ``paths``.
+
+    Raises:
+        InputError: a map cannot be found (a resumed run whose copy is missing names
+            both places).
+    """
+    from torchratslam.maps import native
+    from torchratslam.maps.io import load_state
+
+    maps = []
+    for k, p in enumerate(paths):
+        copy = out / LOADED_DIR / f"map{k}"
+        if resume and copy.is_dir():
+            state = native.load_state(copy)
+            state.name = str(Path(p))
+        elif resume and not Path(p).exists():
+            raise InputError(
+                f"--resume {out}: the loaded map {p} is gone and {out / LOADED_DIR} holds no "
+                f"copy of it (the run began before runs kept one); put the map back at {p}"
+            )
+        else:
+            state = load_state(p)
+        maps.append(state)
+    return maps
 
 
 def write_record(out: Path, record: RunRecord) -> None:

@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from ratslam_graph.atomic import LOCK_NAME as LOCK
 from torchratslam.cli import main
 from torchratslam.experiments import run_dataset as rd
 from torchratslam.maps.native import load_state, read_map_info
@@ -221,3 +222,80 @@ def test_load_runs_resume_and_an_unmerged_map_is_written_and_reported(tmp_path, 
     m = json.loads((u / "metrics.json").read_text())
     assert m["merges"] == [] and m["unmerged"] == [{"map": str(other), "written": "unmerged/map0"}]
     assert load_state(u / "unmerged" / "map0").equals(load_state(other))
+
+
+@pytest.mark.parametrize("gone", ["moved", "deleted"])
+def test_a_load_run_resumes_after_its_loaded_map_moved_or_went(tmp_path, capsys, gone):
+    """The stored maps a ``--load`` run began with are kept in OUT while it can be
+    resumed: the resumed run needs OUT alone, and ends with the uninterrupted run's map,
+    bit for bit; a map merged before the stop and one never merged alike."""
+    s1, other = tmp_path / "s1", tmp_path / "other"
+    assert main([*_argv(SESSION, s1), "--max-frames", "30", "--no-progress"]) == 0
+    assert main([*_argv("sim:loop?laps=1&frames=20", other), "--no-progress"]) == 0
+    loads = ["--load", str(s1), "--load", str(other)]
+    more = ["--max-frames", "40", "--checkpoint-every", "15", "--no-progress"]
+    full = tmp_path / "full"
+    assert main([*_argv(SESSION, full), *loads, *more]) == 0
+    m = json.loads((full / "metrics.json").read_text())
+    assert len(m["merges"]) == 1 and len(m["unmerged"]) == 1  # s1 merged, other never
+    assert not (full / "loaded").exists()  # a finished run keeps no copies
+    out = tmp_path / "out"
+    script = tmp_path / "killer.py"
+    script.write_text(KILLER)
+    done = subprocess.run(
+        [sys.executable, str(script), "35", *_argv(SESSION, out), *loads, *more],
+        capture_output=True,
+        text=True,
+    )
+    assert done.returncode == -9, done.stderr[-2000:]
+    assert read_map_info(out / "state")["stopped_at_frame"] == 30
+    before = {p: load_state(p) for p in (s1, other)}
+    for p in (s1, other):  # the loaded maps move away (or are deleted) before the resume
+        if gone == "moved":
+            p.rename(tmp_path / f"{p.name}-moved")
+        else:
+            import shutil
+
+            shutil.rmtree(p)
+    capsys.readouterr()
+    assert main(["run", "--resume", str(out), "--no-progress"]) == 0, capsys.readouterr().err
+    _same_map(full, out)
+    resumed = json.loads((out / "metrics.json").read_text())
+    assert [{**r, "time_s": 0} for r in resumed["merges"]] == [
+        {**r, "time_s": 0} for r in m["merges"]
+    ]
+    assert resumed["unmerged"] == m["unmerged"] and resumed["loaded"] == m["loaded"]
+    assert load_state(out / "unmerged" / "map1").equals(before[other])
+    assert not (out / "loaded").exists()
+
+
+def test_a_resume_whose_loaded_map_is_gone_and_not_kept_names_both_places(tmp_path, capsys):
+    """A run stopped before runs kept their loaded maps (no OUT/loaded) cannot go on
+    without the map: one line naming where it was and what OUT lacks; OUT untouched."""
+    s1 = tmp_path / "s1"
+    assert main([*_argv(SESSION, s1), "--max-frames", "20", "--no-progress"]) == 0
+    out = tmp_path / "out"
+    script = tmp_path / "killer.py"
+    script.write_text(KILLER)
+    more = ["--max-frames", "30", "--checkpoint-every", "10", "--no-progress"]
+    done = subprocess.run(
+        [sys.executable, str(script), "15", *_argv(SESSION, out), "--load", str(s1), *more],
+        capture_output=True,
+        text=True,
+    )
+    assert done.returncode == -9, done.stderr[-2000:]
+    import shutil
+
+    shutil.rmtree(out / "loaded")  # as an older run left it
+    shutil.rmtree(s1)
+
+    def files():  # the lock is taken and released again: its content is not the run's
+        return sorted((p, p.stat().st_mtime_ns) for p in out.rglob("*") if p.name != LOCK)
+
+    before = files()
+    capsys.readouterr()
+    assert main(["run", "--resume", str(out), "--no-progress"]) == 2
+    err = capsys.readouterr().err
+    assert f"the loaded map {s1} is gone" in err and "put the map back" in err
+    assert len(err.strip().splitlines()) == 2 and "Traceback" not in err
+    assert files() == before
