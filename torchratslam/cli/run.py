@@ -25,7 +25,8 @@ A checkpoint (a loadable partial map in OUT/state) is saved every 1000 frames
 frame N), the map as of frame N is saved in OUT/state, marked partial (metrics.json
 "partial": true, "stopped_at_frame": N), and the command exits non-zero; `run --resume
 OUT` continues it (a run killed without a word, from its last checkpoint) and ends with
-the map an uninterrupted run makes, bit for bit. A new run refuses an OUT that holds a
+the map an uninterrupted run makes, bit for bit (a --load run keeps copies of its
+loaded maps in OUT/loaded until it finishes, so the originals may move meanwhile). A new run refuses an OUT that holds a
 stopped run (continue it with --resume, or start again with --overwrite). torchratslam
 replaces only the files it wrote in OUT, never others."""
 
