@@ -16,6 +16,7 @@ Example:
 
 from __future__ import annotations
 
+import logging
 import threading
 import time
 from array import array
@@ -24,7 +25,9 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["MODULES", "TimeLogger"]
+__all__ = ["MODULES", "TimeLogger", "watch_compiles"]
+
+log = logging.getLogger(__name__)
 
 MODULES = ("odometry", "local_view", "pose_cells", "experience_map")
 """The modules the pipeline times, in per-frame order."""
@@ -150,3 +153,39 @@ def _stats(ms: np.ndarray) -> dict[str, Any]:
         "max_ms": float(ms.max()),
         "total_s": float(ms.sum() / 1000.0),
     }
+
+
+_WATCHING = {"on": False, "said": False}
+
+
+def watch_compiles() -> None:
+    """Say once per process, before it starts, that numba is compiling torchratslam's
+    kernels (the first use after installing or updating: up to ~15 s; numba caches them
+    on disk, so later runs load them in a moment). Idempotent and cheap after the first
+    call; nothing happens without numba."""
+    if _WATCHING["on"]:
+        return
+    _WATCHING["on"] = True
+    try:
+        from numba.core import event
+    except ImportError:  # pragma: no cover - numba is a dependency
+        return
+
+    class _Notice(event.Listener):
+        def on_start(self, ev: Any) -> None:
+            if _WATCHING["said"]:
+                return
+            fn = getattr(ev.data.get("dispatcher"), "py_func", None)
+            if not str(getattr(fn, "__module__", "")).startswith("torchratslam."):
+                return
+            _WATCHING["said"] = True
+            log.warning(
+                "compiling torchratslam's numba kernels (the first use after installing or "
+                "updating: up to ~15 s, once; they are cached on disk, and a run's frames/s "
+                "leaves this start-up out)"
+            )
+
+        def on_end(self, ev: Any) -> None:
+            pass
+
+    event.register("numba:compile", _Notice())

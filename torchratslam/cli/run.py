@@ -26,9 +26,10 @@ frame N), the map as of frame N is saved in OUT/state, marked partial (metrics.j
 "partial": true, "stopped_at_frame": N), and the command exits non-zero; `run --resume
 OUT` continues it (a run killed without a word, from its last checkpoint) and ends with
 the map an uninterrupted run makes, bit for bit (a --load run keeps copies of its
-loaded maps in OUT/loaded until it finishes, so the originals may move meanwhile). A new run refuses an OUT that holds a
-stopped run (continue it with --resume, or start again with --overwrite). torchratslam
-replaces only the files it wrote in OUT, never others."""
+loaded maps in OUT/loaded until it finishes, so the originals may move meanwhile). A
+new run refuses an OUT that holds a stopped run (continue it with --resume, or start
+again with --overwrite). torchratslam replaces only the files it wrote in OUT, never
+others."""
 
 EPILOG = """examples:
   torchratslam run --config configs/virtual_tour.yaml --data sim:virtual_tour --out out/vt

@@ -85,7 +85,11 @@ class RunMetrics:
         experiences: the map's experiences.
         links: the map's links.
         wall_s: this process's time.
-        fps: this process's frames per second.
+        fps: this process's frames per second, the start-up left out (the frames after
+            the first over the time after it).
+        startup_s: this process's time to its first frame's result (numba compiling its
+            kernels on the first use after installing, caches warming), kept out of
+            ``fps``.
         ms_per_frame: per module, mean and median milliseconds per frame.
         pipelined: whether the run used one thread per module.
         backend: the experience map's relaxation backend.
@@ -126,6 +130,7 @@ class RunMetrics:
     odometry: str
     data: str
     config: str
+    startup_s: float | None = None
     loaded: tuple[str, ...] | None = None
     resumed_at_frame: int | None = None
     tum: dict[str, str] | None = None
@@ -241,6 +246,7 @@ def _metrics(
         links=int(result.links),
         wall_s=float(result.wall_s),
         fps=float(result.fps),
+        startup_s=float(getattr(result, "startup_s", 0.0)),
         ms_per_frame=per_module,
         pipelined=bool(result.pipelined),
         backend=slam.config.experience_map.exp_backend,
@@ -384,12 +390,17 @@ def write_scale_report(recorder: Any, slam: Any, out: Path, label: str) -> dict[
     return {k: report[k] for k in ("last_over_first", "peak_memory_mb")}
 
 
+def _startup(seconds: float) -> str:
+    """The start-up beside the frames/s it is left out of, when it is worth saying."""
+    return f" after a start-up of {seconds:.1f} s" if seconds >= 1.0 else ""
+
+
 def summary_line(metrics: RunMetrics, out: Path) -> str:
     """The line ``torchratslam run`` prints."""
     m = metrics
     line = (
         f"{m.frames_this_run} frames in {m.wall_s:.1f} s "
-        f"({m.fps:.1f} frames/s): {m.templates} templates, "
+        f"({m.fps:.1f} frames/s{_startup(m.startup_s or 0.0)}): {m.templates} templates, "
         f"{m.experiences} experiences, {m.links} links"
     )
     if m.ate_rmse_m is None and m.ate_frames is not None:

@@ -37,7 +37,7 @@ from torchratslam.protocols import (
 )
 from torchratslam.readers.visual_odometry import GivenOdometry
 from torchratslam.registry import EXPERIENCE_MAPS, LOCAL_VIEWS, ODOMETRY, POSE_CELLS
-from torchratslam.timing import TimeLogger
+from torchratslam.timing import TimeLogger, watch_compiles
 
 __all__ = ["RatSLAM"]
 
@@ -287,6 +287,7 @@ class RatSLAM:
                 experience map labels the frame's transition with it and monitors link
                 confidence (Eq. 9 of the experience-map paper). None: unlabelled.
         """
+        watch_compiles()  # numba's first compilation is said, not a silent pause
         index = self.frame_index
         odo, view = self._stage_view(frame, index)
         action, pc = self._stage_pose_cells(view, odo, index)
@@ -371,19 +372,28 @@ class RatSLAM:
             )
         pipelined = self.pipelined if pipelined is None else pipelined
         report = RunProgress(total, show=progress, callback=callback)
+        first: list[float] = []  # when the first frame's result came (the start-up's end)
+
+        def on_result(r: StepResult) -> None:
+            if not first:
+                first.append(time.perf_counter())
+            report(r)
+
         try:
             with parked_gc():  # see parked_gc: no full collections at random frames
                 t0 = time.perf_counter()
                 if pipelined:
-                    self._run_pipelined(it, report)
+                    self._run_pipelined(it, on_result)
                 else:
                     for frame in it:
-                        report(self.step_frame(frame))
+                        on_result(self.step_frame(frame))
         finally:
             report.close()
         wall = time.perf_counter() - t0
         n_t, n_e, n_l = self.counts()
-        return RunResult(report.n, wall, n_t, n_e, n_l, self.timings.summary(), pipelined)
+        startup = first[0] - t0 if first else 0.0
+        summary = self.timings.summary()
+        return RunResult(report.n, wall, n_t, n_e, n_l, summary, pipelined, startup)
 
     def _run_pipelined(
         self, frames: Iterator[Frame], on_result: Callable[[StepResult], None]

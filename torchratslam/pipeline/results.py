@@ -48,6 +48,9 @@ class RunResult:
         templates, experiences, links: map size at the end.
         timings: :meth:`TimeLogger.summary` of the whole session (ms per frame per module).
         pipelined: whether the pipelined mode ran.
+        startup_s: the wall-clock time to the first frame's result (s): the first frame
+            with every one-off cost of the start (numba compiling its kernels on the
+            first use after installing, caches warming).
     """
 
     frames: int
@@ -57,8 +60,14 @@ class RunResult:
     links: int
     timings: dict[str, dict[str, Any]] = field(default_factory=dict)
     pipelined: bool = False
+    startup_s: float = 0.0
 
     @property
     def fps(self) -> float:
-        """Frames per second of wall-clock time."""
+        """Frames per second of wall-clock time, the start-up left out: the frames after
+        the first over the time after it (with one frame, or no start-up measured, the
+        whole call)."""
+        rest = self.wall_s - self.startup_s
+        if self.frames > 1 and self.startup_s > 0 and rest > 0:
+            return (self.frames - 1) / rest
         return self.frames / self.wall_s if self.wall_s > 0 else 0.0
