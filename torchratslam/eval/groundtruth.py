@@ -154,8 +154,8 @@ def check_groundtruth_covers(
         )
     if c.in_time < 1.0:
         log.warning(
-            "%s: the ground truth covers %.0f%% of %s's times (%s); poses outside it are "
-            "clamped to its ends",
+            "%s: the ground truth covers %.0f%% of %s's times (%s); the ATE is taken over "
+            "the poses inside it only",
             source,
             100 * c.in_time,
             what,

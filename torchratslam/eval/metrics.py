@@ -5,6 +5,9 @@
   odometry integration; they live in :mod:`ratslam_graph.geometry` and are
   re-exported here.
 * :func:`interpolate_groundtruth` -- ground-truth poses at given times.
+* :func:`ate_at_times` -- the ATE of poses at given times over those the ground truth
+  covers (none clamped to its ends), undefined below :data:`MIN_ATE_POSES`, with the
+  count; :data:`ATE_ALIGNMENT` names the alignment every ATE of the project uses.
 * :func:`icp` / :func:`icp_rmse` -- the project's ICP figure (not the papers'):
   point-to-point ICP between two maps (nearest neighbours, closed-form rigid update,
   repeat until the motion is tiny); the RMSE (m) over the final nearest-neighbour
@@ -32,10 +35,13 @@ from ratslam_graph.geometry import (
 from torchratslam.errors import InputError
 
 __all__ = [
+    "ATE_ALIGNMENT",
+    "MIN_ATE_POSES",
     "IcpResult",
     "Se2Alignment",
     "align_se2",
     "apply_se2",
+    "ate_at_times",
     "ate_rmse",
     "dead_reckoning",
     "icp",
@@ -53,6 +59,40 @@ def _points(a: np.ndarray, name: str) -> np.ndarray:
     if not np.all(np.isfinite(arr[:, :2])):
         raise InputError(f"{name}: contains NaN or infinite positions; clean the input first")
     return arr[:, :2]
+
+
+ATE_ALIGNMENT = "SE(2)"
+"""The alignment of every ATE the project reports: a rigid SE(2) transform (rotation and
+translation, no scale) fitted by least squares (Umeyama's closed form in 2D)."""
+MIN_ATE_POSES = 3
+"""Fewer poses with ground truth leave an ATE after an SE(2) alignment undefined."""
+
+
+def ate_at_times(
+    xy: np.ndarray, t: np.ndarray, groundtruth: np.ndarray
+) -> tuple[float | None, int]:
+    """The ATE (m) of positions ``xy`` at times ``t`` against ``groundtruth``, after an
+    :data:`ATE_ALIGNMENT` alignment, over the poses whose time the ground truth covers
+    (none is compared with a pose clamped to its ends) and whose position is finite.
+
+    Returns:
+        ``(ate, n)``: ``n`` poses with ground truth; ``ate`` None when ``n`` is under
+        :data:`MIN_ATE_POSES`.
+
+    Shape:
+        xy: ``(N, 2+)``; t: ``(N,)``; groundtruth: ``(T, 4)`` rows ``[t, x, y, theta]``.
+    """
+    gt = np.asarray(groundtruth, dtype=np.float64)
+    q = np.asarray(t, dtype=np.float64).reshape(-1)
+    p = np.asarray(xy, dtype=np.float64).reshape(q.size, -1)[:, :2]
+    if gt.ndim != 2 or gt.shape[0] == 0 or q.size == 0:
+        return None, 0
+    ok = (q >= gt[0, 0] - 1e-9) & (q <= gt[-1, 0] + 1e-9) & np.isfinite(p).all(axis=1)
+    n = int(ok.sum())
+    if n < MIN_ATE_POSES:
+        return None, n
+    truth = interpolate_groundtruth(gt, q[ok])
+    return float(ate_rmse(p[ok], truth[:, :2])), n
 
 
 def interpolate_groundtruth(groundtruth: np.ndarray, t: np.ndarray) -> np.ndarray:

@@ -25,6 +25,7 @@ from ratslam_graph.atomic import atomic_write_text
 from torchratslam.errors import InputError
 from torchratslam.eval.groundtruth import check_groundtruth_covers
 from torchratslam.eval.icp import compare_icp, libicp_starts
+from torchratslam.eval.metrics import ATE_ALIGNMENT
 from torchratslam.maps.io import load_state, map_format
 from torchratslam.viz.plots import draw_icp_overlay, save_figure
 
@@ -67,19 +68,28 @@ def _run_data(path: Path) -> str | None:
     return None
 
 
-def map_ate(state: Any, gt: np.ndarray | None) -> tuple[float | None, str]:
+ATE_OVER = "experiences at their creation times"
+"""What compare-maps' ATE compares with the ground truth (a run's ATE compares the
+experience current after each frame, at the frame's time: another figure)."""
+
+
+def map_ate(state: Any, gt: np.ndarray | None) -> tuple[float | None, str, int]:
     """ATE (m) of the experiences' positions against ``gt`` at their creation times,
-    after rigid alignment; ``(None, why)`` when it cannot be computed."""
-    from torchratslam.eval.metrics import ate_rmse, interpolate_groundtruth
+    after an SE(2) alignment, over the experiences the ground truth's times cover;
+    ``(None, why, n)`` when it cannot be computed. ``n``: the experiences with ground
+    truth."""
+    from torchratslam.eval.metrics import MIN_ATE_POSES, ate_at_times
 
     if gt is None:
-        return None, "no ground truth"
-    if state.n_experiences < 3:
-        return None, "fewer than 3 experiences (an ATE after a rigid alignment needs 3)"
+        return None, "no ground truth", 0
+    if state.n_experiences < MIN_ATE_POSES:
+        return None, "fewer than 3 experiences (an ATE after a rigid alignment needs 3)", 0
     if np.ptp(state.exp_t) == 0:
-        return None, "the map has no experience creation times (reference format)"
-    truth = interpolate_groundtruth(gt, state.exp_t)
-    return float(ate_rmse(state.exp_pose[:, :2], truth[:, :2])), "ok"
+        return None, "the map has no experience creation times (reference format)", 0
+    ate, n = ate_at_times(state.exp_pose[:, :2], state.exp_t, gt)
+    if ate is None:
+        return None, f"{n} experiences lie inside the ground truth's times; an ATE needs 3", n
+    return ate, "ok", n
 
 
 def compare_maps(
@@ -119,9 +129,11 @@ def compare_maps(
         sources[key] = src if gt is not None else None
         if gt is not None and s.n_experiences > 1 and np.ptp(s.exp_t) > 0:
             check_groundtruth_covers(s.exp_t, s.exp_pose, gt, source=str(src), what=str(p))
-        ate, why = map_ate(s, gt)
+        ate, why, n_gt = map_ate(s, gt)
         out[key] = {"path": str(p), "format": map_format(p), **s.summary(), "ate_rmse_m": ate}
         out[key]["groundtruth"] = sources[key]
+        if gt is not None:
+            out[key].update(ate_alignment=ATE_ALIGNMENT, ate_over=ATE_OVER, ate_poses=n_gt)
         if ate is None:
             out[key]["ate_note"] = (
                 "no ground truth of its own (not a run's OUT): give --groundtruth"
@@ -185,6 +197,11 @@ def summary_text(report: dict[str, Any]) -> str:
     for key in ("a", "b"):
         r = report[key]
         ate = "-" if r["ate_rmse_m"] is None else f"{r['ate_rmse_m']:.4g} m"
+        if r["ate_rmse_m"] is not None:
+            ate += (
+                f" ({r['ate_alignment']}-aligned, {r['ate_over']}: {r['ate_poses']} of "
+                f"{r['experiences']} with ground truth)"
+            )
         lines.append(
             f"{key.upper()}: {r['path']} ({r['format']}): {r['templates']} templates, "
             f"{r['experiences']} experiences, {r['links']} links; ATE {ate}"

@@ -86,14 +86,15 @@ class _Sized:
 
 def _map_metrics(state: MapState, gt: np.ndarray | None) -> dict[str, Any]:
     """Counts and the experience ATE: every experience's final position against the
-    ground truth at its creation time, after rigid SE(2) alignment."""
-    from torchratslam.eval.metrics import ate_rmse, interpolate_groundtruth
+    ground truth at its creation time, after rigid SE(2) alignment, over the experiences
+    the ground truth covers (``ate_poses``; under 3 the ATE is None)."""
+    from torchratslam.eval.metrics import ATE_ALIGNMENT, ate_at_times
 
     out: dict[str, Any] = dict(state.summary())
     out["ate_rmse_m"] = None
-    if gt is not None and state.n_experiences >= 2:
-        truth = interpolate_groundtruth(gt, state.exp_t)
-        out["ate_rmse_m"] = float(ate_rmse(state.exp_pose[:, :2], truth[:, :2]))
+    if gt is not None:
+        out["ate_rmse_m"], out["ate_poses"] = ate_at_times(state.exp_pose, state.exp_t, gt)
+        out["ate_alignment"] = ATE_ALIGNMENT
     return out
 
 

@@ -43,6 +43,9 @@ __all__ = [
 log = logging.getLogger(__name__)
 
 UNMERGED_DIR = "unmerged"
+RUN_ATE_OVER = "the experience current after each frame, at the frame's time"
+"""What a run's ATE compares with the ground truth (``compare-maps`` and the multisession
+report compare each experience at its creation time: another figure)."""
 OUTPUT_FILES = ("metrics.json", "experiences.csv", "trajectory.csv", "map.png", "pose_cells.png")
 TUM_FILES = ("tum_experience.txt", "tum_frame.txt", "tum_groundtruth.txt")
 SCALE_FILES = ("scale.json", "scale.md", "scale.png")
@@ -150,6 +153,11 @@ class RunMetrics:
     def to_json(self) -> dict[str, Any]:
         """What metrics.json holds: the fields that are not None, but the scale summary."""
         out = {k: v for k, v in asdict(self).items() if v is not None and k != "scale"}
+        if self.ate_frames is not None:  # which ATE this is: the alignment and the poses
+            from torchratslam.eval.metrics import ATE_ALIGNMENT
+
+            out["ate_alignment"] = ATE_ALIGNMENT
+            out["ate_over"] = RUN_ATE_OVER
         if self.ate_frames is not None and self.ate_rmse_m is None:
             out["ate_rmse_m"] = None  # undefined, and said why
             out["ate_undefined"] = (
@@ -412,7 +420,7 @@ def summary_line(metrics: RunMetrics, out: Path) -> str:
         ate = m.ate_rmse_m
         line += f", ATE {ate:.3f} m" if math.isfinite(ate) else ""
         if m.ate_frames is not None:
-            line += f" (SE(2)-aligned, over {m.ate_frames} of {m.frames} frames)"
+            line += f" (SE(2)-aligned, over {m.ate_frames} of {m.frames} frames with ground truth)"
         if m.ate_frame_rmse_m is not None:
             line += f" (per-frame pose {m.ate_frame_rmse_m:.3f} m)"
         dr = m.dead_reckoning_ate_m

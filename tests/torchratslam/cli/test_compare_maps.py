@@ -93,7 +93,57 @@ def test_each_run_is_judged_against_its_own_ground_truth(small_run, tmp_path, ca
     assert main(["compare-maps", str(a), str(b), "--json", str(js)]) == 0
     rep = json.loads(js.read_text())
     assert rep["b"]["groundtruth"] == data_b
-    want, _ = map_ate(load_state(b), _try_gt(data_b))
+    want, _, _ = map_ate(load_state(b), _try_gt(data_b))
     assert rep["b"]["ate_rmse_m"] == pytest.approx(want, rel=1e-12)
-    wrong, _ = map_ate(load_state(b), _try_gt(rep["a"]["groundtruth"]))
+    wrong, _, _ = map_ate(load_state(b), _try_gt(rep["a"]["groundtruth"]))
     assert abs(rep["b"]["ate_rmse_m"] - wrong) > 1e-6
+
+
+def _se2_ate(p, q):
+    """Least-squares rotation + translation of p onto q (closed form), then the RMSE."""
+    pc, qc = p - p.mean(0), q - q.mean(0)
+    th = math.atan2(
+        float(np.sum(pc[:, 0] * qc[:, 1] - pc[:, 1] * qc[:, 0])),
+        float(np.sum(pc[:, 0] * qc[:, 0] + pc[:, 1] * qc[:, 1])),
+    )
+    c, s = math.cos(th), math.sin(th)
+    moved = pc @ np.array([[c, -s], [s, c]]).T + q.mean(0)
+    return float(np.sqrt(np.mean(np.sum((moved - q) ** 2, axis=1))))
+
+
+def test_every_ate_names_its_alignment_and_counts_only_poses_with_ground_truth(
+    small_run, tmp_path, capsys
+):
+    """A ground truth covering part of the map's times: the ATE is taken over the
+    experiences inside it (none clamped to its ends), named SE(2)-aligned, with the
+    count, in the JSON and on the terminal."""
+    from torchratslam.experiments.compare_maps import load_groundtruth
+
+    out = small_run.out
+    gt = load_groundtruth("sim:loop?laps=1&frames=40")
+    state = load_state(out)
+    cut = float(np.quantile(state.exp_t, 0.7))
+    part = gt[gt[:, 0] <= cut]
+    csv = tmp_path / "gt.csv"
+    np.savetxt(csv, part, delimiter=",", header="t,x,y,theta", comments="")
+    js = tmp_path / "cmp.json"
+    capsys.readouterr()
+    assert (
+        main(["compare-maps", str(out), str(out), "--groundtruth", str(csv), "--json", str(js)])
+        == 0
+    )
+    text = capsys.readouterr().out
+    rep = json.loads(js.read_text())
+    inside = state.exp_t <= part[-1, 0] + 1e-9
+    n = int(inside.sum())
+    assert 3 <= n < state.n_experiences
+    truth = np.column_stack(
+        [np.interp(state.exp_t[inside], part[:, 0], part[:, k]) for k in (1, 2)]
+    )
+    want = _se2_ate(state.exp_pose[inside, :2], truth)
+    for key in ("a", "b"):
+        r = rep[key]
+        assert r["ate_alignment"] == "SE(2)" and r["ate_poses"] == n
+        assert r["ate_over"] == "experiences at their creation times"
+        assert r["ate_rmse_m"] == pytest.approx(want, rel=1e-9, abs=1e-12)
+    assert f"SE(2)-aligned, experiences at their creation times: {n} of " in text

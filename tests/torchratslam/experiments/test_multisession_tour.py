@@ -5,6 +5,7 @@ from __future__ import annotations
 import contextlib
 import io
 
+import numpy as np
 import pytest
 
 from torchratslam.config import load_config
@@ -38,3 +39,24 @@ def test_the_report_says_which_map_the_papers_icp_moves(lab_tour_run):
     _, out, _ = lab_tour_run
     text = report_markdown(out["report"])
     assert "the single-session map moved onto the multisession map" in text
+
+
+def test_the_report_ate_counts_only_experiences_with_ground_truth_and_names_its_alignment(
+    small_run,
+):
+    from torchratslam.experiments.compare_maps import load_groundtruth
+    from torchratslam.experiments.multisession_report import ATE_NOTE
+    from torchratslam.experiments.multisession_tour import _map_metrics
+    from torchratslam.maps.io import load_state
+
+    state = load_state(small_run.out)
+    gt = load_groundtruth("sim:loop?laps=1&frames=40")
+    full = _map_metrics(state, gt)
+    assert full["ate_poses"] == state.n_experiences and full["ate_alignment"] == "SE(2)"
+    part = gt[gt[:, 0] <= float(np.quantile(state.exp_t, 0.6))]
+    m = _map_metrics(state, part)
+    n = int((state.exp_t <= part[-1, 0] + 1e-9).sum())
+    assert m["ate_poses"] == n < state.n_experiences  # none clamped to the last pose
+    two = part[part[:, 0] <= float(np.sort(state.exp_t)[1])]
+    assert _map_metrics(state, two)["ate_rmse_m"] is None  # under 3 poses: undefined
+    assert "SE(2) alignment" in ATE_NOTE and "creation time" in ATE_NOTE

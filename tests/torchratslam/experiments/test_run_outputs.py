@@ -50,3 +50,12 @@ def test_summary_line_names_what_was_measured():
     )
     nan = replace(BASE, ate_rmse_m=math.nan, loaded=("a",), merges=[])
     assert ", ATE" not in summary_line(nan, out) and ", 0 merges" in summary_line(nan, out)
+
+
+def test_a_measured_ate_names_its_alignment_and_what_it_compares():
+    m = replace(BASE, ate_rmse_m=0.5, ate_frames=9).to_json()
+    assert m["ate_alignment"] == "SE(2)" and m["ate_frames"] == 9
+    assert m["ate_over"] == "the experience current after each frame, at the frame's time"
+    assert "ate_alignment" not in BASE.to_json()  # no ground truth: no ATE to name
+    line = summary_line(replace(BASE, ate_rmse_m=0.5, ate_frames=9), Path("o"))
+    assert "ATE 0.500 m (SE(2)-aligned, over 9 of 10 frames with ground truth)" in line
