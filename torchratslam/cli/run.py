@@ -279,6 +279,8 @@ def main(args: argparse.Namespace) -> int:
             )
         metrics = resume_run(args.resume, settings)
         print(summary_line(metrics, Path(args.resume)))
+        if metrics.ate_note:
+            print(f"note: {metrics.ate_note}")
         return 0
     missing = [f"--{k}" for k in ("config", "data", "out") if not getattr(args, k)]
     if missing:
@@ -306,4 +308,6 @@ def main(args: argparse.Namespace) -> int:
     )
     metrics = run_dataset(options, args.out, settings)
     print(summary_line(metrics, Path(args.out)))
+    if metrics.ate_note:
+        print(f"note: {metrics.ate_note}")
     return 0

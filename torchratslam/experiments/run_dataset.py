@@ -514,7 +514,14 @@ def _run(
             Manifest(out).add(list(TUM_FILES))  # recorded before they are written
             extras = dataclasses.replace(extras, **write_tum(slam, out, poses, data))
         metrics = write_outputs(
-            slam, out, result, data=data, extras=extras, record=record, info={"partial": False}
+            slam,
+            out,
+            result,
+            data=data,
+            extras=extras,
+            record=record,
+            info={"partial": False},
+            frame_poses=_frame_poses(poses, slam) if not skip else None,
         )
         if recorder is not None and len(recorder.templates):
             Manifest(out).add(list(SCALE_FILES))
@@ -525,6 +532,14 @@ def _run(
         raise _save_error(exc, out, out, saved["frame"]) from None
     run_state.drop_loaded(out)  # a finished run cannot be resumed: its copies are done with
     return metrics
+
+
+def _frame_poses(recorder: Any, slam: Any) -> Any:
+    """Every frame's pose estimate (None when the recorder missed frames)."""
+    try:
+        return recorder.poses(slam)
+    except (RatSLAMError, ValueError, IndexError):
+        return None
 
 
 def _kept(out: Path, frame: int | None) -> str:

@@ -108,6 +108,10 @@ class RunMetrics:
         dead_reckoning_ate_m: dead reckoning's ATE (with ground truth).
         ate_frames: the frames with a ground-truth pose, which both ATEs are taken over
             (after a rigid SE(2) alignment); under 3 the ATEs are None (undefined).
+        ate_frame_pose_m: the ATE of every frame's pose estimate (the experience current
+            after it plus the odometry since), SE(2)-aligned, over the same frames (not
+            on a resumed run).
+        ate_note: why the map's ATE is above dead reckoning's, measured (None: it is not).
         merges: a multisession run's merges.
         unmerged: the stored maps that never merged with the run's map: per map its
             ``--load`` option (``map``) and where it was written (``written``).
@@ -144,6 +148,8 @@ class RunMetrics:
     merges: Any = None
     unmerged: list[dict[str, str]] | None = None
     ate_frames: int | None = None
+    ate_frame_pose_m: float | None = None
+    ate_note: str | None = None
     input_warnings: list[str] | None = None
     partial: bool | None = None
     stopped_at_frame: int | None = None
@@ -304,12 +310,15 @@ def write_outputs(
     extras: RunExtras,
     record: RunRecord | None = None,
     info: dict[str, Any] | None = None,
+    frame_poses: np.ndarray | None = None,
 ) -> RunMetrics:
     """Write state/ (first), experiences.csv, trajectory.csv, map.png, pose_cells.png and
     metrics.json (last) for a run, finished or stopped (``info["partial"]``), each
     atomically and recorded in OUT's manifest before it is written. With ``record`` (the
     run's options) the state holds the history a resumed run needs and OUT/run.json the
-    record. Returns the metrics."""
+    record; with ``frame_poses`` (every frame's pose estimate) metrics.json holds their
+    ATE too, and says why when the map's ATE is above dead reckoning's. Returns the
+    metrics."""
     info = dict(info or {"partial": False})
     info.setdefault("frames", int(slam.frame_index))
     out.mkdir(parents=True, exist_ok=True)
@@ -328,6 +337,14 @@ def write_outputs(
         info["unmerged"] = unmerged
     info["input_warnings"] = list(getattr(data, "input_warnings", ())) or None
     metrics = replace(_metrics(slam, result, extras, ate, dr, info), ate_frames=ate_frames)
+    if ate is not None:
+        from torchratslam.experiments import run_ate
+
+        frame_ate = run_ate.frame_pose_ate(slam, data, frame_poses)
+        note = run_ate.ate_note(
+            ate, dr, frame_ate, run_ate.mean_link_length(slam), run_ate.loop_closures(slam)
+        )
+        metrics = replace(metrics, ate_frame_pose_m=frame_ate, ate_note=note)
     _write_figures(slam, out, poses, traj, gt_xy, data, extras.data)
     atomic_write_text(
         out / "metrics.json",
