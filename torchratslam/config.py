@@ -29,7 +29,7 @@ import yaml
 
 from ratslam_graph.errors import unknown_name_message
 from ratslam_graph.params import ExperienceMapParams, Params, param
-from torchratslam.errors import ConfigError, InputError
+from torchratslam.errors import ConfigError, InputError, option
 
 
 def _presets_dir() -> Path:
@@ -576,7 +576,7 @@ def load_config(
             raise
     # something is wrong: name the file when the file alone is wrong, else the overrides
     RatSLAMConfig.from_flat(flat, source=str(p))
-    return RatSLAMConfig.from_flat({**flat, **overrides}, source="overrides (--set)")
+    return RatSLAMConfig.from_flat({**flat, **overrides}, source=option("--set", "overrides"))
 
 
 def to_openratslam_txt(config: RatSLAMConfig, *, comment: str = "") -> str:

@@ -4,16 +4,50 @@ Every error the library raises on purpose derives from :class:`RatSLAMError`, so
 caller (the CLI in particular) can catch one root class and print a one-line message.
 The root lives in ``graph`` because ``graph`` is the bottom layer: ``torchratslam``
 imports it, never the other way round.
+
+A message that names an option names it for both callers with :func:`option`: the
+command line's flag and the Python argument. ``str(error)`` (what a Python caller sees)
+shows the argument; :meth:`RatSLAMError.cli_message` (what the command line prints)
+shows the flag. Neither sees the other's spelling.
 """
 
 from __future__ import annotations
 
 import difflib
+import re
 from collections.abc import Iterable
+
+_OPTION = re.compile(r"\[\[([^|\]]*)\|([^\]]*)\]\]")
+
+
+def option(flag: str, argument: str) -> str:
+    """An option named in an error message for both callers: ``flag`` on the command
+    line (``"--overwrite"``), ``argument`` in Python (``"overwrite=True"``)."""
+    return f"[[{flag}|{argument}]]"
+
+
+def for_python(text: str) -> str:
+    """``text`` with every :func:`option` as its Python argument."""
+    return _OPTION.sub(r"\2", text)
+
+
+def for_cli(text: str) -> str:
+    """``text`` with every :func:`option` as its command-line flag."""
+    return _OPTION.sub(r"\1", text)
 
 
 class RatSLAMError(Exception):
-    """Root of every error raised deliberately by graph and torchratslam."""
+    """Root of every error raised deliberately by graph and torchratslam.
+
+    ``str()`` names options as Python arguments, :meth:`cli_message` as flags (see
+    :func:`option`)."""
+
+    def __str__(self) -> str:
+        return for_python(super().__str__())
+
+    def cli_message(self) -> str:
+        """The message as the command line prints it: options named by their flags."""
+        return for_cli(super().__str__())
 
 
 class ConfigError(RatSLAMError, ValueError):

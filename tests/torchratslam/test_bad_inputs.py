@@ -45,7 +45,7 @@ def test_yaml_keys_null_or_integer_are_one_line(tmp_path, text, pattern):
 def test_a_bad_set_value_is_blamed_on_set_not_on_the_file(tmp_path):
     p = tmp_path / "c.yaml"
     p.write_text("pc_dim_xy: 15\n")
-    with pytest.raises(ConfigError, match=r"^overrides \(--set\): parameter 'exp_loops'"):
+    with pytest.raises(ConfigError, match=r"^overrides: parameter 'exp_loops'"):
         load_config(p, exp_loops="-3")
     p.write_text("pc_dim_xy: abc\n")
     with pytest.raises(ConfigError, match=rf"^{p}: parameter 'pc_dim_xy'"):

@@ -177,7 +177,8 @@ def _main(argv: Sequence[str] | None) -> int:
         if args.debug:
             traceback.print_exc()
         name = type(exc).__name__
-        msg = " ".join(str(exc).split("\n"))
+        text = exc.cli_message() if isinstance(exc, RatSLAMError) else str(exc)
+        msg = " ".join(text.split("\n"))  # options named by their flags, not as Python
         print(f"torchratslam {args.command}: error: {msg} [{name}]", file=sys.stderr)
         if not args.debug:
             print("  (run with --debug for the full traceback)", file=sys.stderr)

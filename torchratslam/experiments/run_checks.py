@@ -9,7 +9,7 @@ from pathlib import Path
 from typing import Any
 
 from ratslam_graph.atomic import Manifest
-from torchratslam.errors import InputError
+from torchratslam.errors import InputError, option
 from torchratslam.experiments.run_options import RunOptions
 from torchratslam.experiments.run_outputs import OUTPUT_FILES, TUM_FILES, UNMERGED_DIR
 from torchratslam.experiments.run_state import LOADED_DIR, RUN_RECORD, STATE_DIR
@@ -24,12 +24,16 @@ def check_counts(threads: int, max_frames: int | None, checkpoint_every: int | N
         InputError: a count below one.
     """
     if threads < 1:
-        raise InputError(f"--threads must be >= 1, got {threads}")
+        raise InputError(f"{option('--threads', 'threads')} must be >= 1, got {threads}")
     if max_frames is not None and max_frames <= 0:
-        raise InputError(f"--max-frames must be a positive number of frames, got {max_frames}")
+        raise InputError(
+            f"{option('--max-frames', 'max_frames')} must be a positive number of frames, "
+            f"got {max_frames}"
+        )
     if checkpoint_every is not None and checkpoint_every < 0:
         raise InputError(
-            f"--checkpoint-every must be >= 1 frame (0: no checkpoints), got {checkpoint_every}"
+            f"{option('--checkpoint-every', 'checkpoint_every')} must be >= 1 frame (0: no "
+            f"checkpoints), got {checkpoint_every}"
         )
 
 

@@ -26,7 +26,7 @@ from pathlib import Path
 from typing import Any
 
 from ratslam_graph.atomic import Manifest
-from torchratslam.errors import InputError, RatSLAMError
+from torchratslam.errors import InputError, RatSLAMError, option
 from torchratslam.experiments import run_state
 from torchratslam.experiments.run_checks import (
     check_applicable,
@@ -296,14 +296,16 @@ def _start(
         if not resume and not settings.overwrite:
             if finished_run(out):
                 raise InputError(
-                    f"{out} holds a finished run; choose another --out, or replace it with "
-                    "--overwrite"
+                    f"{out} holds a finished run; choose another {option('--out', 'out')}, or "
+                    f"replace it with {option('--overwrite', 'RunSettings(overwrite=True)')}"
                 )
             stopped = stopped_run(out)
             if stopped is not None:
                 raise InputError(
-                    f"{out} holds a run that {stopped}; continue it with: torchratslam run "
-                    f"--resume {out} (or start it again with --overwrite)"
+                    f"{out} holds a run that {stopped}; continue it with: "
+                    f"{option(f'torchratslam run --resume {out}', f'resume_run({str(out)!r})')}"
+                    f" (or start it again with "
+                    f"{option('--overwrite', 'RunSettings(overwrite=True)')})"
                 )
         record = RunRecord(options=opts, config_flat=config.to_flat(), run_id=run_id)
         return _run(opts, config, out, dev, resume, status, settings, record)

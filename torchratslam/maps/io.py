@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from torchratslam.errors import InputError, MapFormatError, RatSLAMError
+from torchratslam.errors import InputError, MapFormatError, RatSLAMError, option
 from torchratslam.maps import native
 from torchratslam.maps.compat import check_compatible
 from torchratslam.maps.reference_format import (
@@ -245,7 +245,7 @@ def convert_map(
     import tempfile
 
     if to not in ("native", "reference"):
-        raise InputError(f"--to must be 'native' or 'reference', got {to!r}")
+        raise InputError(f"{option('--to', 'to')} must be 'native' or 'reference', got {to!r}")
     src, dst = Path(source), Path(target)
     if dst.exists() and (not dst.is_dir() or any(dst.iterdir())):
         raise InputError(f"{dst} exists and is not empty; convert writes a new directory")

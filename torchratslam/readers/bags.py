@@ -33,7 +33,7 @@ from typing import Any
 import cv2
 import numpy as np
 
-from torchratslam.errors import InputError
+from torchratslam.errors import InputError, option
 from torchratslam.messages import Frame
 from torchratslam.readers.datasets import (
     IRAT_GROUNDTRUTH_TOPIC,
@@ -278,7 +278,8 @@ class BagReader(Reader):
                 if image_topic not in topics:
                     raise InputError(
                         f"{self.path}: no image topic {image_topic!r} "
-                        f"(topics: {', '.join(sorted(topics))}); pass --image-topic"
+                        f"(topics: {', '.join(sorted(topics))}); pass "
+                        f"{option('--image-topic', 'image_topic')}"
                     )
                 self._count = sum(c.msgcount for c in reader.connections if c.topic == image_topic)
                 # header stamps of the images (deserialising is needed for the stamps)

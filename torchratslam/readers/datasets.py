@@ -43,7 +43,7 @@ import cv2
 import numpy as np
 
 from ratslam_graph.geometry import wrap_angle
-from torchratslam.errors import InputError
+from torchratslam.errors import InputError, option
 from torchratslam.messages import Frame
 from torchratslam.readers.limits import MAX_SPEED, MAX_TURN_RATE
 
@@ -140,9 +140,9 @@ def check_odometry(
     for arg, limit in (("max_speed", max_speed), ("max_turn_rate", max_turn_rate)):
         if not (np.isfinite(limit) and limit > 0):
             raise InputError(f"{arg} = {limit!r}: a limit must be a finite number above 0")
-    for name, v, limit, unit, option in (
-        ("vtrans", vtrans, max_speed, "m/s", "--max-speed"),
-        ("vrot", vrot, max_turn_rate, "rad/s", "--max-turn-rate"),
+    for name, v, limit, unit, flag in (
+        ("vtrans", vtrans, max_speed, "m/s", option("--max-speed", "max_speed")),
+        ("vrot", vrot, max_turn_rate, "rad/s", option("--max-turn-rate", "max_turn_rate")),
     ):
         v = np.asarray(v, dtype=np.float64)
         bad = ~np.isfinite(v) | (np.abs(v) > limit)
@@ -151,7 +151,7 @@ def check_odometry(
             what = "is not finite" if not np.isfinite(v[i]) else f"exceeds {limit:g} {unit}"
             raise InputError(
                 f"{source}, line {i + first_line}: {name} = {v[i]:g} {unit} {what}; fix that "
-                f"row, or raise the limit ({option}) if the platform really moves that fast"
+                f"row, or raise the limit ({flag}) if the platform really moves that fast"
             )
 
 

@@ -31,7 +31,7 @@ import cv2
 import numpy as np
 import yaml
 
-from torchratslam.errors import InputError
+from torchratslam.errors import InputError, option
 from torchratslam.sim.session import Session
 from torchratslam.sim.tours import TOURS, get_tour
 
@@ -165,12 +165,14 @@ def write_dataset(
 
     out = Path(out_dir)
     if out.exists() and not out.is_dir():
-        raise InputError(f"{out} exists and is not a directory; choose another --out")
+        raise InputError(
+            f"{out} exists and is not a directory; choose another {option('--out', 'out_dir')}"
+        )
     if out.exists() and any(out.iterdir()):
         if not overwrite:
             raise InputError(
-                f"{out} exists and is not empty; choose another --out or pass overwrite "
-                "(--overwrite)"
+                f"{out} exists and is not empty; choose another {option('--out', 'out_dir')} "
+                f"or pass {option('--overwrite', 'overwrite=True')}"
             )
         # --overwrite replaces only a directory this project wrote (its manifest)
         Manifest(out).check_overwrite("overwrite it")

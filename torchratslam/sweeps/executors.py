@@ -14,7 +14,7 @@ import sys
 from collections.abc import Callable, Iterator, Sequence
 from typing import Any
 
-from torchratslam.errors import ConfigError, RatSLAMError
+from torchratslam.errors import ConfigError, RatSLAMError, option
 from torchratslam.sweeps.runner import run_group_safely
 from torchratslam.sweeps.spec import RunSpec
 
@@ -121,8 +121,9 @@ class LocalExecutor(Executor):
                         self._pool = None
                         raise RatSLAMError(
                             "a sweep worker process died (out of memory or killed); the "
-                            "finished runs are in the table: run again with resume "
-                            "(--resume), perhaps with fewer --workers"
+                            "finished runs are in the table: run again with "
+                            f"{option('--resume', 'resume=True')}, perhaps with fewer "
+                            f"{option('--workers', 'workers')}"
                         ) from None
                     yield unit, rows
         finally:
@@ -146,7 +147,8 @@ class RayExecutor(Executor):
             import ray
         except ImportError:
             raise ConfigError(
-                "Ray is not installed; pip install 'torchratslam[ray]' (or drop --ray)"
+                "Ray is not installed; pip install 'torchratslam[ray]' (or drop "
+                f"{option('--ray', 'ray=True')})"
             ) from None
         self._ray = ray
         self._started = False

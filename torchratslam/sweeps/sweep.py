@@ -14,11 +14,14 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-from torchratslam.errors import InputError
+from torchratslam.errors import InputError, option
 from torchratslam.sweeps.executors import Executor, make_executor
 from torchratslam.sweeps.runner import batch_key
 from torchratslam.sweeps.spec import RunSpec, SweepSpec, from_dict, load_sweep
 from torchratslam.sweeps.table import columns, read_table, to_frame, write_table
+
+OVERWRITE = option("--overwrite", "overwrite=True")
+RESUME = option("--resume", "resume=True")
 
 __all__ = ["Progress", "make_units", "sweep"]
 
@@ -113,17 +116,16 @@ def _check_replaceable(table: Path, runs: list[RunSpec]) -> None:
     if have - wanted:
         raise InputError(
             f"{table} holds {len(have - wanted)} runs of another sweep; choose another out "
-            "folder, or start again with --overwrite (overwrite=True) to replace it"
+            f"folder, or start again with {OVERWRITE} to replace it"
         )
     if len(have) < len(wanted):
         raise InputError(
             f"{table} holds {len(have)} of this sweep's {len(wanted)} runs (a stopped "
-            "sweep); continue it with --resume (resume=True), or start again with "
-            "--overwrite (overwrite=True)"
+            f"sweep); continue it with {RESUME}, or start again with {OVERWRITE}"
         )
     raise InputError(
         f"{table} holds this sweep, finished; choose another out folder, or run it again "
-        "with --overwrite (overwrite=True)"
+        f"with {OVERWRITE}"
     )
 
 
@@ -197,7 +199,7 @@ def sweep(
             raise InputError(
                 f"{table} holds {len(others)} runs of another sweep, which resuming this "
                 "one would drop; choose another out folder, or start again with "
-                "--overwrite (overwrite=True) to replace it"
+                f"{OVERWRITE} to replace it"
             )
         for row in finished:
             rid = str(row.get("run_id"))

@@ -32,7 +32,7 @@ import yaml
 
 from ratslam_graph.io import atomic_write_text
 from torchratslam.config import load_config
-from torchratslam.errors import ConfigError, InputError
+from torchratslam.errors import ConfigError, InputError, option
 from torchratslam.sweeps.executors import Executor, make_executor
 from torchratslam.sweeps.runner import METRICS
 from torchratslam.sweeps.spec import RunSpec, run_id, with_seed
@@ -264,7 +264,8 @@ def tune(
     if n_done and not resume:
         raise InputError(
             f"study {study_name!r} already has {n_done} trials in its storage; pass "
-            "resume=True (--resume) to continue it, or choose another out / study name"
+            f"{option('--resume', 'resume=True')} to continue it, or choose another out / "
+            "study name"
         )
     if resume:  # resuming or joining: a seed of its own, or processes sharing the
         # study would suggest the same values (a new study keeps `sampler_seed`)

@@ -157,7 +157,7 @@ def test_checks_before_the_work_fail_with_one_line_and_leave_no_out(setup, tmp_p
         (["--device", "foo"], "not a torch device"),
         (["--set", "pc_dim_xy=100000"], "pose-cell network needs"),
         (["--set", "image_crop_x_min=10", "--set", "image_crop_x_max=5"], "image_crop_x_max"),
-        (["--set", "pc_dim_xy=abc"], "overrides (--set): parameter 'pc_dim_xy'"),
+        (["--set", "pc_dim_xy=abc"], "--set: parameter 'pc_dim_xy'"),
         (["--image-topic", "/cam"], "--image-topic does not apply to directory data"),
     ]
     if not torch.cuda.is_available():

@@ -196,7 +196,7 @@ def test_failed_run_is_recorded_and_the_sweep_goes_on(tmp_path):
     table = tmp_path / "results.csv"
     lines = table.read_text().splitlines(keepends=True)
     table.write_text("".join(lines[:3]))
-    with pytest.raises(InputError, match=r"holds 2 of this sweep's 4 runs .*--resume"):
+    with pytest.raises(InputError, match=r"holds 2 of this sweep's 4 runs .*resume=True"):
         torchratslam.sweep(raw, tmp_path, **kw)
     assert table.read_text() == "".join(lines[:3])
     other = {**raw, "parameters": {"exp_loops": [3]}}
@@ -213,7 +213,7 @@ def test_a_finished_sweep_is_not_run_again_without_overwrite(sweep_file, referen
     out = tmp_path / "twice"
     shutil.copytree(ref_out, out)
     before = {p.name: p.read_bytes() for p in out.rglob("*") if p.is_file()}
-    with pytest.raises(InputError, match=r"holds this sweep, finished.*--overwrite"):
+    with pytest.raises(InputError, match=r"holds this sweep, finished.*overwrite=True"):
         torchratslam.sweep(sweep_file, out, workers=1, progress=False)
     assert {p.name: p.read_bytes() for p in out.rglob("*") if p.is_file()} == before
     torchratslam.sweep(sweep_file, out, workers=1, figures=False, overwrite=True, progress=False)
