@@ -40,7 +40,9 @@ def register(subparsers: Any) -> argparse.ArgumentParser:
         "--groundtruth",
         metavar="FILE",
         help="true node poses, one 'x y th' per line in node order (an index column is "
-        "allowed), e.g. --groundtruth gt_poses.txt",
+        "allowed), or for a saved state the project's groundtruth.csv (t,x,y,theta, as run "
+        "and simulate write it) or a dataset, taken at each experience's creation time, "
+        "e.g. --groundtruth gt_poses.txt or --groundtruth data/vt/groundtruth.csv",
     )
     p.add_argument(
         "--backends",
@@ -80,6 +82,12 @@ def main(args: argparse.Namespace) -> int:
         f"{args.map}: {np.asarray(pg.poses).shape[0]} nodes, {np.asarray(pg.edges).shape[0]} edges"
     )
     print(format_table(rows))
+    ate = next((r for r in rows if r.get("ate_rmse_m") is not None), None)
+    if ate is not None:
+        print(
+            f"ATE: {ate['ate_alignment']}-aligned, over {ate['ate_poses']} of "
+            f"{np.asarray(pg.poses).shape[0]} nodes with ground truth ({ate['ate_over']})"
+        )
     if args.json:
         write_rows_json(rows, args.json)
     return 0

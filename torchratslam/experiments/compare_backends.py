@@ -12,7 +12,7 @@ from typing import Any
 import numpy as np
 
 from ratslam_graph.atomic import atomic_write_text
-from torchratslam.errors import InputError
+from torchratslam.errors import InputError, option
 
 __all__ = [
     "format_table",
@@ -42,7 +42,10 @@ def load_posegraph(path: str | Path) -> Any:
     """A pose graph from a graph file or a saved RatSLAM state."""
     p = Path(path)
     if not p.exists():
-        raise InputError(f"--map {str(path)!r}: not found; give a .g2o/TORO file or a saved state")
+        raise InputError(
+            f"{option('--map', 'map_path')} {str(path)!r}: not found; give a .g2o/TORO file "
+            "or a saved state"
+        )
     if p.is_file() and p.suffix.lower() in (".g2o", ".graph", ".txt", ".toro"):
         from ratslam_graph.io import read_posegraph
 
@@ -69,6 +72,19 @@ def format_table(rows: list[dict[str, Any]]) -> str:
     return "\n".join(lines)
 
 
+def _is_timed(path: Path) -> bool:
+    """A ground truth of the project's own format (``groundtruth.csv``: a header
+    ``t,x,y,theta``, one timed pose per frame), or a dataset (directory or ``sim:``)."""
+    if str(path).startswith("sim:") or path.is_dir():
+        return True
+    try:
+        with open(path, encoding="utf-8", errors="replace") as fh:
+            head = fh.readline().strip().lower().replace(" ", "")
+    except OSError:
+        return False
+    return head.startswith("t,x,y")
+
+
 def _groundtruth(path: str | Path | None, n: int) -> np.ndarray | None:
     """True node poses from ``path`` (None without one), checked against ``n`` nodes."""
     if not path:
@@ -77,8 +93,22 @@ def _groundtruth(path: str | Path | None, n: int) -> np.ndarray | None:
 
     gt = read_poses(path)
     if gt.shape[0] != n:
-        raise InputError(f"--groundtruth {path}: {gt.shape[0]} poses but the map has {n} nodes")
+        raise InputError(
+            f"{option('--groundtruth', 'groundtruth')} {path}: {gt.shape[0]} poses but the map "
+            f"has {n} nodes"
+        )
     return gt
+
+
+def _timed_rows(rows: list[dict[str, Any]], exp_t: np.ndarray, gt: np.ndarray) -> None:
+    """Each row's ATE over the experiences whose creation time the timed ground truth
+    covers (SE(2)-aligned; undefined under 3)."""
+    from torchratslam.eval.metrics import ATE_ALIGNMENT, ate_at_times
+
+    for r in rows:
+        r["ate_rmse_m"], r["ate_poses"] = ate_at_times(np.asarray(r["poses"]), exp_t, gt)
+        r["ate_alignment"] = ATE_ALIGNMENT
+        r["ate_over"] = "experiences at their creation times"
 
 
 def run_comparison(
@@ -93,11 +123,15 @@ def run_comparison(
     Args:
         map_path: a g2o/TORO file or a saved state.
         backends: backend names.
-        groundtruth: a file of true node poses (ATE per backend), or None.
+        groundtruth: true node poses (a file of ``x y th`` per node, in node order), or
+            for a saved state also a timed ground truth: the project's ``groundtruth.csv``
+            (``t,x,y,theta``, what ``run`` and ``simulate`` write) or a dataset, taken at
+            each experience's creation time; None: no ATE.
         passes: passes of the alpha backends.
 
     Returns:
-        The pose graph and one row per backend (``name``, ``time_s``, ``error``, ...).
+        The pose graph and one row per backend (``name``, ``time_s``, ``error``,
+        ``ate_rmse_m`` with ``ate_alignment`` and ``ate_poses``, ...).
 
     Raises:
         InputError: no backends, a missing map, mismatched ground truth, passes < 1.
@@ -105,12 +139,51 @@ def run_comparison(
     from ratslam_graph.compare import compare_backends
 
     if not backends:
-        raise InputError("--backends is empty; e.g. --backends alpha,gtsam,isam2")
-    pg = load_posegraph(map_path)
-    gt = _groundtruth(groundtruth, np.asarray(pg.poses).shape[0])
+        example = option("--backends alpha,gtsam,isam2", "backends=('alpha', 'gtsam')")
+        raise InputError(f"{option('--backends', 'backends')} is empty; e.g. {example}")
     if passes < 1:
-        raise InputError(f"--passes must be >= 1, got {passes}")
-    return pg, compare_backends(pg, backends=backends, groundtruth=gt, passes=passes)
+        raise InputError(f"{option('--passes', 'passes')} must be >= 1, got {passes}")
+    timed = groundtruth is not None and bool(str(groundtruth)) and _is_timed(Path(groundtruth))
+    state = _state(map_path) if timed else None
+    pg = posegraph_from_state(state) if state is not None else load_posegraph(map_path)
+    n = int(np.asarray(pg.poses).shape[0])
+    if state is not None and groundtruth is not None:
+        from torchratslam.experiments.compare_maps import load_groundtruth
+
+        gt_t = load_groundtruth(groundtruth)
+        rows = compare_backends(pg, backends=backends, groundtruth=None, passes=passes)
+        _timed_rows(rows, np.asarray(state.exp_t, np.float64), gt_t)
+        return pg, rows
+    gt = _groundtruth(groundtruth, n)
+    rows = compare_backends(pg, backends=backends, groundtruth=gt, passes=passes)
+    if gt is not None:
+        from torchratslam.eval.metrics import ATE_ALIGNMENT
+
+        for r in rows:
+            r.update(ate_alignment=ATE_ALIGNMENT, ate_poses=n, ate_over="nodes, in order")
+    return pg, rows
+
+
+def _state(map_path: str | Path) -> Any:
+    """The saved map at ``map_path`` (a timed ground truth needs its creation times)."""
+    p = Path(map_path)
+    if not p.exists():
+        load_posegraph(p)  # the one line for a missing map
+    if p.is_file():
+        raise InputError(
+            f"{option('--groundtruth', 'groundtruth')}: a timed ground truth (t,x,y,theta) "
+            f"needs a saved map with its experiences' creation times; {p} is a graph file: "
+            "give a file of 'x y th' per node instead"
+        )
+    from torchratslam.maps.io import load_state
+
+    state = load_state(p)
+    if state.n_experiences > 1 and np.ptp(state.exp_t) == 0:
+        raise InputError(
+            f"{p} holds no experience creation times (a reference-format map), so a timed "
+            "ground truth cannot be matched to its nodes; give a file of 'x y th' per node"
+        )
+    return state
 
 
 def write_rows_json(rows: list[dict[str, Any]], path: str | Path) -> None:
