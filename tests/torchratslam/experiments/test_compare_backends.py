@@ -53,7 +53,6 @@ def test_the_projects_own_groundtruth_csv_is_accepted(small_run, tmp_path, capsy
 
 def test_a_timed_groundtruth_for_a_graph_file_is_one_line(small_run, tmp_path, capsys):
     from ratslam_graph.io import write_g2o
-
     from torchratslam.experiments.compare_backends import posegraph_from_state
 
     g2o = tmp_path / "m.g2o"
