@@ -167,7 +167,8 @@ def plot_pose_cells(
         (a.max(axis=2), "y", "theta", "max over x"),
     )
     for ax, (img, xl, yl, name) in zip(axes, views):
-        ax.imshow(img, origin="lower", cmap="viridis", aspect="auto")
+        im = ax.imshow(img, origin="lower", cmap="viridis", aspect="auto")
+        fig.colorbar(im, ax=ax, label="activity (largest cell; the network sums to 1)")
         ax.set_xlabel(f"{xl} (cells)")
         ax.set_ylabel(f"{yl} (cells)")
         ax.set_title(name, fontsize=9)

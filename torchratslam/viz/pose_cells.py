@@ -25,7 +25,11 @@ import numpy as np
 
 from torchratslam.errors import InputError
 
-__all__ = ["plot_activity", "plot_packet_path", "projections", "split_at_wraps"]
+__all__ = ["COLOUR_LABEL", "plot_activity", "plot_packet_path", "projections", "split_at_wraps"]
+
+COLOUR_LABEL = "activity summed over theta (fraction of the network's total, which is 1)"
+"""The x-y panel's colour bar: the activity is normalised to sum to 1 over the network
+after every step (OpenRatSLAM's normalisation), so a cell's share is unitless."""
 
 
 def _numpy(a: Any) -> np.ndarray:
@@ -86,8 +90,9 @@ def plot_activity(
 ) -> Path | Any:
     """Activity projections, with the packet's path when given.
 
-    Left: activity summed over theta (x right, y up) with the packet centres (and an
-    optional reference path, e.g. integrated odometry). Middle: activity summed over x
+    Left: activity summed over theta (x right, y up; its colour bar in
+    :data:`COLOUR_LABEL`'s unit) with the packet centres (and an optional reference
+    path, e.g. integrated odometry). Middle: activity summed over x
     and y per theta cell. Right (when ``centres`` is given): the packet's theta against
     the step number.
 
@@ -109,7 +114,8 @@ def plot_activity(
     panels = 3 if centres is not None else 2
     fig, axes = plt.subplots(1, panels, figsize=(4.2 * panels, 4.0))
     ax = axes[0]
-    ax.imshow(xy, origin="lower", cmap="viridis", extent=(-0.5, n_x - 0.5, -0.5, n_y - 0.5))
+    im = ax.imshow(xy, origin="lower", cmap="viridis", extent=(-0.5, n_x - 0.5, -0.5, n_y - 0.5))
+    fig.colorbar(im, ax=ax, fraction=0.046, pad=0.04, label=COLOUR_LABEL)
     if reference is not None:
         plot_packet_path(ax, reference, (n_x, n_y), label="odometry", color="w", lw=1.0, ls="--")
     if centres is not None:
@@ -126,7 +132,7 @@ def plot_activity(
     ax.bar(np.arange(n_th), th, width=1.0, color="tab:blue")
     ax.set(
         xlabel="theta (cells)",
-        ylabel="activity (summed, arbitrary units)",
+        ylabel="activity summed over x, y (fraction of the total)",
         title="theta activity (summed over x, y)",
         xlim=(-0.5, n_th - 0.5),
     )

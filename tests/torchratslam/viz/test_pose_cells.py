@@ -53,3 +53,16 @@ def test_demo_packet_follows_the_odometry_round_the_loop():
     assert np.abs(d).max() < 0.6
     dth = (centres[-1, 2] - centres[0, 2] + 18) % 36 - 18
     assert abs(dth) < 0.2  # the heading came round to the start
+
+
+def test_the_activity_panel_has_a_labelled_colour_bar_over_its_values():
+    from torchratslam.viz.pose_cells import COLOUR_LABEL
+
+    a = np.zeros((36, 21, 21))
+    a[18, 10, 10], a[3, 4, 5] = 0.75, 0.25  # the network's activity sums to 1
+    fig = plot_activity(a)
+    bars = [ax for ax in fig.axes if ax.get_ylabel() == COLOUR_LABEL]
+    assert len(bars) == 1
+    lo, hi = bars[0].get_ylim()
+    assert lo == 0.0 and hi == 0.75  # the colour scale spans the summed activity
+    assert "fraction" in COLOUR_LABEL
