@@ -75,7 +75,10 @@ def main(args: argparse.Namespace) -> int:
         run_comparison,
         write_rows_json,
     )
+    from torchratslam.experiments.out_checks import check_out_file
 
+    inputs = [args.map] + ([args.groundtruth] if args.groundtruth else [])
+    check_out_file(args.json, inputs=inputs, flag=("--json", "json"))
     names = tuple(s.strip() for s in args.backends.split(",") if s.strip())
     pg, rows = run_comparison(args.map, names, groundtruth=args.groundtruth, passes=args.passes)
     print(

@@ -75,7 +75,10 @@ def register(subparsers: Any) -> argparse.ArgumentParser:
 
 def main(args: argparse.Namespace) -> int:
     from torchratslam.experiments.compare_maps import compare_maps, summary_text, write_json
+    from torchratslam.experiments.out_checks import check_out_file
 
+    for flag, target in (("--json", args.json), ("--figure", args.figure)):
+        check_out_file(target, inputs=(args.a, args.b), flag=(flag, flag[2:]))
     config = None
     if args.config:
         from torchratslam.config import load_config

@@ -46,6 +46,11 @@ def register(subparsers: Any) -> argparse.ArgumentParser:
     p.add_argument(
         "--out", required=True, type=Path, help="output directory, e.g. --out out/mbaram"
     )
+    p.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="replace an earlier MBARAM run's outputs in OUT, e.g. --overwrite",
+    )
     p.add_argument("--laps", type=int, default=5, help="mapping laps, e.g. --laps 3")
     p.add_argument(
         "--loc-laps",
@@ -114,12 +119,20 @@ def _parse_sets(items: list[str]) -> dict[str, str]:
 
 def main(args: argparse.Namespace) -> int:
     """Run the subcommand."""
+    from torchratslam.errors import InputError
     from torchratslam.experiments.mbaram_tour import (
         MBARAMTourOptions,
         run_experiment,
         summary_line,
     )
+    from torchratslam.experiments.out_checks import check_out_dir
 
+    # OUT: new, empty, or an earlier MBARAM run's (replaced only with --overwrite)
+    if check_out_dir(args.out, what="MBARAM run", marks=("state.npz",)) and not args.overwrite:
+        raise InputError(
+            f"{args.out} holds a finished MBARAM run; choose another --out, or replace it "
+            "with --overwrite"
+        )
     tour = run_experiment(
         args.data,
         args.out,

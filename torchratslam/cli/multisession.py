@@ -174,10 +174,10 @@ class _Running:
 
     def __init__(self, out: Path, overwrite: bool) -> None:
         from torchratslam.errors import InputError
+        from torchratslam.experiments.out_checks import check_out_dir
 
         self.path = out / RUNNING
-        if out.exists() and not out.is_dir():
-            raise InputError(f"--out {out}: exists and is not a directory; choose another path")
+        check_out_dir(out, what="multisession run", marks=(RUNNING, *FINISHED))
         if self.path.exists() and not overwrite:
             raise InputError(
                 f"{out} holds a multisession run that did not finish ({RUNNING}); it cannot "

@@ -1,0 +1,75 @@
+"""Every command that writes an OUT refuses, before any work, a non-empty OUT holding
+something else (a user's files, another command's run) and a finished run of its own
+without --overwrite; a single output file is never one of the inputs or another
+command's file. Nothing is written or changed by a refused command."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from torchratslam.cli import main
+
+SMALL = str(Path(__file__).resolve().parents[2] / "data" / "small.yaml")
+
+
+def _snapshot(d):
+    return sorted((p.relative_to(d), p.stat().st_mtime_ns, p.stat().st_size) for p in d.rglob("*"))
+
+
+@pytest.fixture
+def places(small_run, tmp_path):
+    foreign = tmp_path / "foreign"
+    foreign.mkdir()
+    (foreign / "notes.txt").write_text("mine")
+    return small_run, foreign
+
+
+def _refused(argv, capsys, *dirs, says):
+    before = [_snapshot(d) for d in dirs]
+    capsys.readouterr()
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert says in err and "Traceback" not in err, err
+    assert [_snapshot(d) for d in dirs] == before  # nothing written, nothing changed
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["multisession", "--config", SMALL, "--tour", "sim:loop", "--no-figures", "--quiet"],
+        ["mbaram", "--data", "sim:loop?frames=30", "--no-plots", "--no-progress"],
+        ["tune", "--config", SMALL, "--data", "sim:loop?frames=20", "--trials", "1"],
+    ],
+    ids=["multisession", "mbaram", "tune"],
+)
+def test_an_out_holding_something_else_is_refused(places, argv, capsys):
+    run, foreign = places
+    for out in (foreign, run.out):
+        _refused([*argv, "--out", str(out)], capsys, out, says="is not empty and holds no")
+
+
+def test_a_finished_mbaram_run_is_replaced_only_with_overwrite(tmp_path, capsys):
+    out = tmp_path / "mb"
+    argv = ["mbaram", "--data", "sim:loop?frames=30", "--no-plots", "--no-progress"]
+    argv += ["--laps", "1", "--loc-laps", "1", "--out", str(out)]
+    assert main(argv) == 0
+    _refused(argv, capsys, out, says="holds a finished MBARAM run")
+    assert main([*argv, "--overwrite"]) == 0
+
+
+def test_an_output_file_is_never_an_input_or_another_commands_file(places, tmp_path, capsys):
+    run, _ = places
+    a = str(run.out)
+    for flag, target in (("--json", "metrics.json"), ("--figure", "map.png")):
+        argv = ["compare-maps", a, a, flag, str(run.out / target)]
+        _refused(argv, capsys, run.out, says="a command never rewrites its inputs")
+    other = tmp_path / "other"
+    assert main(["run", "--config", SMALL, "--data", "sim:loop?frames=20", "--out", str(other),
+                 "--no-progress"]) == 0  # fmt: skip
+    argv = ["compare-maps", a, a, "--json", str(other / "metrics.json")]
+    _refused(argv, capsys, other, says="is a file another torchratslam command wrote")
+    argv = ["compare-backends", "--map", str(run.out / "state"), "--backends", "alpha"]
+    _refused([*argv, "--json", str(other / "metrics.json")], capsys, other, says="manifest")
+    _refused([*argv, "--json", str(run.out / "state" / "x.json")], capsys, run.out, says="input")
