@@ -132,8 +132,14 @@ def check_out(out: Path, inputs: dict[str, str], overwrite: bool) -> None:
         InputError: naming the flag.
     """
     from torchratslam.errors import InputError
+    from torchratslam.maps.native import resolve_native
 
-    paths = {flag: Path(value).resolve() for flag, value in inputs.items()}
+    def the_map(value: str) -> Path:  # a run's OUT and its state/ are the same map
+        p = Path(value)
+        found = resolve_native(p) if p.is_dir() else None
+        return (found or p).resolve()
+
+    paths = {flag: the_map(value) for flag, value in inputs.items()}
     if len(set(paths.values())) < len(paths):
         raise InputError(
             f"{' and '.join(inputs)} are the same map ({next(iter(inputs.values()))}); merging "

@@ -14,7 +14,13 @@ from torchratslam.experiments.run_options import RunOptions
 from torchratslam.experiments.run_outputs import OUTPUT_FILES, TUM_FILES, UNMERGED_DIR
 from torchratslam.experiments.run_state import LOADED_DIR, RUN_RECORD, STATE_DIR
 
-__all__ = ["check_applicable", "check_counts", "check_device", "check_out"]
+__all__ = [
+    "check_applicable",
+    "check_counts",
+    "check_device",
+    "check_inputs_apart",
+    "check_out",
+]
 
 
 def check_counts(threads: int, max_frames: int | None, checkpoint_every: int | None) -> None:
@@ -107,6 +113,35 @@ def check_applicable(opts: RunOptions) -> None:
             f"{' and '.join(given)} do{'es' if len(given) == 1 else ''} not apply to "
             f"{kind} data ({opts.data}); remove {'it' if len(given) == 1 else 'them'}"
         )
+
+
+def check_inputs_apart(out: Path, opts: RunOptions) -> None:
+    """OUT must not be, hold or lie in the run's inputs (the data directory, a ``--load``
+    map, the odometry or ground-truth file): a run never rewrites its inputs. A new
+    folder directly inside a data directory is allowed (it touches none of the data).
+
+    Raises:
+        InputError: naming the option.
+    """
+    target = out.resolve()
+    named: list[tuple[str, str, Any]] = [
+        ("--data", "data", None if str(opts.data).startswith("sim:") else opts.data),
+        ("--odometry", "odometry", opts.odometry),
+        ("--groundtruth", "groundtruth", opts.groundtruth),
+        *(("--load", "load", p) for p in opts.load),
+    ]
+    for flag, arg, value in named:
+        if not value or not Path(str(value)).exists():
+            continue
+        src = Path(str(value)).resolve()
+        if flag == "--data" and target.parent == src and not target.exists():
+            continue  # a new folder beside the data's frames/ and CSVs rewrites none of them
+        if target == src or src in target.parents or target in src.parents:
+            raise InputError(
+                f"{option('--out', 'out')} {out} is (or lies in, or holds) the input given as "
+                f"{option(flag, arg)} {value}; a run never rewrites its inputs: choose "
+                f"another {option('--out', 'out')}"
+            )
 
 
 def check_out(out: Path, *, resume: bool) -> None:

@@ -32,6 +32,7 @@ from torchratslam.experiments.run_checks import (
     check_applicable,
     check_counts,
     check_device,
+    check_inputs_apart,
     check_out,
 )
 from torchratslam.experiments.run_options import RunOptions, RunSettings
@@ -284,6 +285,7 @@ def _start(
     check_config_limits(config)
     dev = check_device(settings.device)
     check_applicable(opts)
+    check_inputs_apart(out, opts)
     check_out(out, resume=resume)
     try:
         created = make_dirs(out)

@@ -247,6 +247,12 @@ def convert_map(
     if to not in ("native", "reference"):
         raise InputError(f"{option('--to', 'to')} must be 'native' or 'reference', got {to!r}")
     src, dst = Path(source), Path(target)
+    rs, rd = src.resolve(), dst.resolve()
+    if rd == rs or rs in rd.parents or rd in rs.parents:
+        raise InputError(
+            f"{dst} is (or lies in, or holds) the map {src} being converted; convert never "
+            "rewrites its input: choose another target"
+        )
     if dst.exists() and (not dst.is_dir() or any(dst.iterdir())):
         raise InputError(f"{dst} exists and is not empty; convert writes a new directory")
     state = load_state(src, config)

@@ -73,3 +73,34 @@ def test_an_output_file_is_never_an_input_or_another_commands_file(places, tmp_p
     argv = ["compare-backends", "--map", str(run.out / "state"), "--backends", "alpha"]
     _refused([*argv, "--json", str(other / "metrics.json")], capsys, other, says="manifest")
     _refused([*argv, "--json", str(run.out / "state" / "x.json")], capsys, run.out, says="input")
+
+
+def test_a_run_convert_or_merge_never_writes_into_its_inputs(places, tmp_path, capsys):
+    from torchratslam.sim import open_sim, write_dataset
+
+    run, _ = places
+    ds = write_dataset(open_sim("sim:loop?laps=1&frames=20"), tmp_path / "ds")
+    argv = ["run", "--config", SMALL, "--data", str(ds), "--no-progress"]
+    for out in (ds, ds / "frames", ds / "frames" / "new"):
+        _refused([*argv, "--out", str(out)], capsys, ds, says="a run never rewrites its inputs")
+    load = [*argv, "--load", str(run.out / "state"), "--overwrite"]
+    for out in (run.out, run.out / "state" / "x"):
+        _refused([*load, "--out", str(out)], capsys, run.out, says="given as --load")
+    assert main([*argv, "--out", str(ds / "run1")]) == 0  # a new folder beside the data
+    _refused(
+        ["convert", str(run.out), str(run.out / "state" / "x"), "--to", "reference"],
+        capsys,
+        run.out,
+        says="convert never rewrites its input",
+    )
+    merge = ["merge", "--config", SMALL, "--loaded", str(run.out), "--partial"]
+    _refused([*merge, str(run.out / "state"), "--out", str(tmp_path / "m")], capsys, run.out,
+             says="are the same map")  # fmt: skip
+    assert not (tmp_path / "m").exists()
+
+
+def test_reproduce_refuses_a_folder_holding_something_else(places, capsys):
+    run, foreign = places
+    for out in (foreign, run.out):
+        argv = ["reproduce", "multisession/virtual-tour", "--quick", "--out", str(out)]
+        _refused(argv, capsys, out, says="holds no report")

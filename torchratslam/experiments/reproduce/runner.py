@@ -30,6 +30,10 @@ log = logging.getLogger(__name__)
 
 
 def _prepare(out: Path, *, overwrite: bool) -> None:
+    from torchratslam.experiments.out_checks import check_out_dir
+
+    # new, empty, or a report of its own: a folder holding anything else is refused
+    check_out_dir(out, what="report", marks=("report.json", "index.json"))
     if (out / "report.json").exists() and not overwrite:
         raise InputError(f"{out} already holds a report; choose another --out or pass --overwrite")
     if out.exists() and not out.is_dir():
