@@ -108,6 +108,10 @@ def main(args: argparse.Namespace) -> int:
     if args.resume and args.overwrite:
         raise InputError("--resume keeps OUT's runs and --overwrite replaces them; give one")
     out = Path(args.out)
+    from torchratslam.experiments.out_checks import check_out_dir
+
+    # new, empty, or a sweep's own folder (whose table the sweep's own checks judge)
+    check_out_dir(out, what="sweep", marks=("results.csv", "results.parquet"))
     table = sweep(
         args.file,
         out,

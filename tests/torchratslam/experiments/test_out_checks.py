@@ -104,3 +104,15 @@ def test_reproduce_refuses_a_folder_holding_something_else(places, capsys):
     for out in (foreign, run.out):
         argv = ["reproduce", "multisession/virtual-tour", "--quick", "--out", str(out)]
         _refused(argv, capsys, out, says="holds no report")
+
+
+def test_sweep_refuses_a_folder_holding_something_else(places, tmp_path, capsys):
+    run, foreign = places
+    spec = tmp_path / "sw.yaml"
+    spec.write_text(
+        f"base: {SMALL}\ndatasets: ['sim:loop?frames=20']\n"
+        "parameters:\n  vt_match_threshold: [0.03, 0.05]\n"
+    )
+    for out in (foreign, run.out):
+        argv = ["sweep", str(spec), "--out", str(out), "--no-progress"]
+        _refused(argv, capsys, out, says="holds no sweep")
