@@ -61,6 +61,7 @@ __all__ = [
     "load_config",
     "param",
     "profile_values",
+    "read_yaml_unique",
 ]
 
 
@@ -453,14 +454,26 @@ class _UniqueKeyLoader(yaml.SafeLoader):
         return super().construct_mapping(node, deep=deep)
 
 
-def _read_yaml(path: Path) -> dict[str, Any]:
+def read_yaml_unique(path: str | Path) -> Any:
+    """The YAML file at ``path`` read with a safe loader that refuses a key given twice
+    (plain YAML keeps the last value silently); None for an empty file.
+
+    Raises:
+        ConfigError: a duplicate key (naming both lines), not valid YAML, not text.
+        InputError: the file cannot be read.
+    """
+    p = Path(path)
     try:
-        data = yaml.load(_read_text(path), Loader=_UniqueKeyLoader)  # a SafeLoader
+        return yaml.load(_read_text(p), Loader=_UniqueKeyLoader)  # a SafeLoader
     except _DuplicateKey as exc:
-        raise ConfigError(f"{path}: {exc}") from None
+        raise ConfigError(f"{p}: {exc}") from None
     except (yaml.YAMLError, RecursionError) as exc:
         one_line = " ".join(str(exc).split())
-        raise ConfigError(f"{path}: not valid YAML ({one_line})") from None
+        raise ConfigError(f"{p}: not valid YAML ({one_line})") from None
+
+
+def _read_yaml(path: Path) -> dict[str, Any]:
+    data = read_yaml_unique(path)
     if data is None:
         raise ConfigError(
             f"{path}: holds no parameters (an empty file); write the keys to change, or "

@@ -39,6 +39,7 @@ from torchratslam.errors import RatSLAMError
 from torchratslam.maps.native import load_map, save_map
 from torchratslam.maps.reference_format import FILES, read_reference
 from torchratslam.readers.datasets import read_groundtruth_csv, read_odometry_csv
+from torchratslam.sweeps.spec import load_sweep
 
 from .maps.test_reference_format import CFG as REF_CFG
 from .maps.test_reference_format import HAND
@@ -156,6 +157,46 @@ def test_fuzz_openratslam_txt_config(text):
     p = WORK / "c.txt"
     p.write_text(text)
     check(load_config, p)
+
+
+# ----------------------------------------------------------------------- sweeps
+SWEEP_VALUES = st.one_of(
+    st.lists(st.one_of(NUMBER_TEXT.map(yaml.safe_load), st.text(max_size=4)), max_size=4),
+    st.fixed_dictionaries(
+        {"start": st.floats(-1, 1), "stop": st.floats(-1, 1)},
+        optional={"num": st.integers(-3, 10**13), "log": st.booleans()},
+    ),
+    YAML_VALUE,
+)
+
+
+@FUZZ
+@given(
+    st.fixed_dictionaries(
+        {},
+        optional={
+            "base": st.sampled_from(["virtual_tour", "irat", "nope", "", None]),
+            "datasets": st.one_of(
+                st.lists(st.sampled_from(["sim:loop", "sim:loop?frames=5", "", "x"]), max_size=2),
+                YAML_VALUE,
+            ),
+            "parameters": st.dictionaries(
+                st.one_of(st.sampled_from(PARAM_KEYS), st.text(max_size=6)),
+                SWEEP_VALUES,
+                max_size=3,
+            ),
+            "mode": st.sampled_from(["grid", "list", "random", 3]),
+            "seeds": st.one_of(st.lists(st.integers(-2, 10**12), max_size=3), YAML_VALUE),
+            "max_frames": st.one_of(st.integers(-2, 10**12), YAML_VALUE),
+            "junk": YAML_VALUE,
+        },
+    ).map(lambda d: yaml.safe_dump(d, allow_unicode=True)),
+)
+def test_fuzz_sweep_file(text):
+    """A sweep file: a spec or one line, at once (a huge grid is counted, not expanded)."""
+    p = WORK / "sweep.yaml"
+    p.write_text(text)
+    check(load_sweep, p)
 
 
 # ----------------------------------------------------------------------- CSVs
@@ -387,6 +428,7 @@ def _corpus_parsers():
         ],
         "odometry": [read_odometry_csv],
         "groundtruth": [read_groundtruth_csv],
+        "sweep": [load_sweep],
     }
 
 
@@ -403,4 +445,4 @@ def test_the_inputs_that_once_failed_are_refused_in_one_line(path):
 
 
 def test_the_corpus_covers_every_parser_folder():
-    assert {p.parent.name for p in CORPUS_FILES} >= {"yaml", "posegraph"}
+    assert {p.parent.name for p in CORPUS_FILES} == set(_corpus_parsers())

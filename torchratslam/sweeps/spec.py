@@ -36,8 +36,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import yaml
-
 from torchratslam.config import RatSLAMConfig, load_config
 from torchratslam.errors import ConfigError, InputError
 
@@ -316,11 +314,14 @@ def load_sweep(path: str | Path) -> SweepSpec:
     p = Path(path)
     if not p.is_file():
         raise InputError(f"sweep file {str(path)!r} not found")
-    try:
-        raw = yaml.safe_load(p.read_text())
-    except yaml.YAMLError as exc:
-        raise ConfigError(f"{p}: not valid YAML ({exc})") from None
-    return from_dict(raw or {}, source=str(p), root=p.parent)
+    from torchratslam.config import read_yaml_unique
+
+    raw = read_yaml_unique(p)  # a key given twice is refused, as in a config
+    if raw is None:
+        raise ConfigError(
+            f"{p}: holds no sweep (an empty file); give at least base, datasets and parameters"
+        )
+    return from_dict(raw, source=str(p), root=p.parent)
 
 
 def with_seed(data: str, seed: int) -> str:
