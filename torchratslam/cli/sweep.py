@@ -132,6 +132,9 @@ def main(args: argparse.Namespace) -> int:
     scored = [r for r in ok if isinstance(r.get("ate_m"), float) and r["ate_m"] == r["ate_m"]]
     if scored:
         best = min(scored, key=lambda r: r["ate_m"])
-        line += f"; best ATE {best['ate_m']:.3f} m (run {best['index']})"
+        line += (
+            f"; best ATE {best['ate_m']:.3f} m (run {best['index']}; SE(2)-aligned, over the "
+            "frames with ground truth, as each run's metrics.json)"
+        )
     print(line)
     return 1 if rows and not ok else 0

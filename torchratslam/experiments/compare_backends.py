@@ -157,10 +157,12 @@ def run_comparison(
     gt = _groundtruth(groundtruth, n)
     rows = compare_backends(pg, backends=backends, groundtruth=gt, passes=passes)
     if gt is not None:
-        from torchratslam.eval.metrics import ATE_ALIGNMENT
+        from torchratslam.eval.metrics import ATE_ALIGNMENT, MIN_ATE_POSES
 
         for r in rows:
             r.update(ate_alignment=ATE_ALIGNMENT, ate_poses=n, ate_over="nodes, in order")
+            if n < MIN_ATE_POSES:  # an SE(2) alignment of fewer poses says nothing
+                r["ate_rmse_m"] = None
     return pg, rows
 
 

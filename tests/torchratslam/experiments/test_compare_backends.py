@@ -63,3 +63,20 @@ def test_a_timed_groundtruth_for_a_graph_file_is_one_line(small_run, tmp_path, c
     assert main(["compare-backends", "--map", str(g2o), "--groundtruth", str(csv)]) == 2
     err = capsys.readouterr().err
     assert "--groundtruth: a timed ground truth" in err and "Traceback" not in err
+
+
+def test_a_per_node_groundtruth_of_fewer_than_three_nodes_gives_no_ate(tmp_path):
+    from ratslam_graph.io import write_g2o
+    from ratslam_graph.posegraph import PoseGraph
+
+    pg = PoseGraph(
+        np.array([[0.0, 0, 0], [1, 0, 0]]),
+        np.array([[0, 1]]),
+        np.array([[1.0, 0, 0]]),
+        np.arange(2),
+    )
+    g2o, gt = tmp_path / "two.g2o", tmp_path / "gt.txt"
+    write_g2o(pg, g2o)
+    gt.write_text("0 0 0\n1 0 0\n")
+    _, rows = run_comparison(g2o, ("alpha",), groundtruth=gt)
+    assert rows[0]["ate_rmse_m"] is None and rows[0]["ate_poses"] == 2
