@@ -188,6 +188,8 @@ def main(args: argparse.Namespace) -> int:
     )
     base = result.get("baseline_value")
     vs = f" (the base config's: {base:.4f})" if base is not None else ""
+    if str(args.metric).startswith("ate"):  # which ATE: as each run's metrics.json
+        vs += "; ATE SE(2)-aligned over the frames with ground truth"
     print(
         f"best {args.metric} {result['best_value']:.4f}{vs} in trial {result['best_trial']} "
         f"of {result['trials']}: {values}; wrote {Path(args.out) / 'best.yaml'}"
