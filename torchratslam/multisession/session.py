@@ -245,14 +245,17 @@ class MultiSessionRatSLAM:
 
     # ------------------------------------------------------------------ stepping
     def step(self, image: Any, odometry: tuple[float, float, float] | None = None) -> StepResult:
-        """Process one image with its odometry (see ``RatSLAM.step``), merging if due."""
+        """Process one image with its odometry (see ``RatSLAM.step``), merging if due; a
+        refused step (bad odometry) leaves everything as it was."""
+        result = self.slam.step(image, odometry)
         self.keep_image(image)
-        return self._after_step(self.slam.step(image, odometry))
+        return self._after_step(result)
 
     def step_frame(self, frame: Any) -> StepResult:
         """Process one :class:`~torchratslam.messages.Frame`, merging if due."""
+        result = self.slam.step_frame(frame)
         self.keep_image(frame.image)
-        return self._after_step(self.slam.step_frame(frame))
+        return self._after_step(result)
 
     def keep_image(self, image: Any) -> None:
         """Remember the image being processed (``merge_anchor="view"`` compares it)."""

@@ -365,3 +365,21 @@ def test_absorbed_links_are_measured_between_the_experiences_they_join():
 def test_an_unknown_merge_anchor_is_refused(session1_map):
     with pytest.raises(ConfigError, match="merge_anchor"):
         MultiSessionRatSLAM(CONFIG, [session1_map], merge_anchor="nearest")
+
+
+def test_a_refused_step_leaves_the_multisession_mapper_as_it_was(tour, session1_map):
+    """Bad odometry is refused before anything changes: the running map, the pending
+    maps, the merges and the image kept for a view-anchored merge."""
+    from torchratslam.errors import InputError
+
+    ms = MultiSessionRatSLAM(CONFIG, [session1_map], merge_anchor="view")
+    frames = list(tour.sessions[1].frames(0, 3))
+    for f in frames[:2]:
+        ms.step_frame(f)
+    before = (ms.get_map(), list(ms.pending), list(ms.merges), ms._image, ms.frame_index)
+    for odo in [(1.0, 2.0), (1e300, 0.0, 0.1), (0.1, float("nan"), 0.1)]:
+        with pytest.raises(InputError):
+            ms.step(frames[2].image, odo)
+    after = (ms.get_map(), list(ms.pending), list(ms.merges), ms._image, ms.frame_index)
+    assert after[0].equals(before[0]) and after[1:3] == before[1:3]
+    assert after[3] is before[3] and after[4] == before[4]
