@@ -144,6 +144,20 @@ def check_inputs_apart(out: Path, opts: RunOptions) -> None:
             )
 
 
+OTHER_COMMANDS = {
+    "report.json": "a multisession run or a reproduced experiment",
+    "running.json": "a multisession run",
+    "seeds.json": "a multisession seed table",
+    "results.csv": "a sweep",
+    "study.journal": "a tuning study",
+    "state.npz": "an MBARAM run",
+    "index.json": "reproduced experiments",
+    "frames": "a dataset",
+}
+"""What another command leaves in its OUT: a run never writes among it (a user's own
+loose files are kept beside a run's, as before)."""
+
+
 def check_out(out: Path, *, resume: bool) -> None:
     """OUT must be a writable directory (or creatable), with no file where a directory
     goes and no file of ours' names that torchratslam did not write."""
@@ -158,6 +172,13 @@ def check_out(out: Path, *, resume: bool) -> None:
         for name in OUTPUT_FILES:
             if (out / name).is_dir():
                 raise InputError(f"{out / name} is a directory (a file goes there); move it away")
+        other = next((n for n in OTHER_COMMANDS if (out / n).exists()), None)
+        if other is not None and not resume:
+            raise InputError(
+                f"{option('--out', 'out')} {out} holds {OTHER_COMMANDS[other]} ({other}); a "
+                f"run does not write among another command's outputs: choose another "
+                f"{option('--out', 'out')}"
+            )
         own = Manifest(out).entries()
         names = (*OUTPUT_FILES, *TUM_FILES, STATE_DIR, RUN_RECORD, UNMERGED_DIR, LOADED_DIR)
         theirs = [n for n in names if (out / n).exists()]

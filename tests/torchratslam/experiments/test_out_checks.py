@@ -116,3 +116,12 @@ def test_sweep_refuses_a_folder_holding_something_else(places, tmp_path, capsys)
     for out in (foreign, run.out):
         argv = ["sweep", str(spec), "--out", str(out), "--no-progress"]
         _refused(argv, capsys, out, says="holds no sweep")
+
+
+@pytest.mark.parametrize("other", ["report.json", "results.csv", "state.npz", "frames"])
+def test_a_run_refuses_an_out_holding_another_commands_outputs(tmp_path, capsys, other):
+    out = tmp_path / "o"
+    out.mkdir()
+    (out / other).mkdir() if other == "frames" else (out / other).write_text("x")
+    argv = ["run", "--config", SMALL, "--data", "sim:loop?frames=10", "--no-progress"]
+    _refused([*argv, "--out", str(out)], capsys, out, says=f"({other}); a run does not write")
