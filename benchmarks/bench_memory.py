@@ -3,7 +3,8 @@
 Each step of :data:`STEPS` is imported cumulatively in one fresh interpreter and the
 process's peak RSS (``VmHWM``) is read after it, so the difference between two rows is
 what that import adds. The last step runs ``torchratslam run`` in the same process on
-the first frames of a dataset (default: 3), and the heavy modules it left loaded are
+the first frames of a dataset (default: 3), with the peak read when its mapping starts,
+when it ends, and around its figures; the heavy modules it left loaded are
 listed (what a run imports that it may not use)::
 
     python -m benchmarks.bench_memory --data out/bench/suburb-20000 [--frames 3]
@@ -51,8 +52,26 @@ for label, stmt in steps:
 run = json.loads(sys.argv[2])
 if run:
     from torchratslam.cli import main
+    from torchratslam.pipeline import RatSLAM
+    try:
+        from torchratslam.experiments import run_outputs as ro
+    except ImportError:
+        ro = None
+    def mark(obj, name, before, after):
+        f = getattr(obj, name, None)
+        if f is None:
+            return
+        def wrapped(*a, **k):
+            rows.append((before, hwm()))
+            out = f(*a, **k)
+            rows.append((after, hwm()))
+            return out
+        setattr(obj, name, wrapped)
+    mark(RatSLAM, 'run', 'run: set up', 'run: %s frames mapped' % sys.argv[3])
+    if ro is not None:
+        mark(ro, '_write_figures', 'run: outputs but figures', 'run: figures written')
     main(run)
-    rows.append(('run (%s frames)' % sys.argv[3], hwm()))
+    rows.append(('run: done', hwm()))
 heavy = [m for m in json.loads(sys.argv[4]) if m in sys.modules]
 print(json.dumps({'rows': rows, 'loaded': heavy}))
 """
