@@ -1,4 +1,5 @@
-"""``import torchratslam`` stays light and gtsam loads only for the gtsam backends.
+"""``import torchratslam`` stays light, gtsam loads only for the gtsam backends, and a
+run that writes no figure and reads no video loads neither matplotlib nor cv2.
 
 Each check runs in a fresh interpreter and inspects ``sys.modules``.
 """
@@ -12,10 +13,14 @@ import pytest
 ROOT = Path(__file__).resolve().parent.parent
 
 
-def _loaded_after(code: str, tmp_path: Path) -> set[str]:
+HEAVY = ("torch", "gtsam")
+PLOTTING = ("matplotlib", "cv2", "PIL")
+
+
+def _loaded_after(code: str, tmp_path: Path, watch: tuple[str, ...] = HEAVY) -> set[str]:
     """Run ``code`` in a new interpreter (cwd outside the checkout); return which of
-    torch / gtsam it left in ``sys.modules``."""
-    probe = code + "\nimport sys\nprint(sorted({'torch', 'gtsam'} & set(sys.modules)))\n"
+    the ``watch`` modules it left in ``sys.modules``."""
+    probe = code + f"\nimport sys\nprint(sorted(set({watch!r}) & set(sys.modules)))\n"
     out = subprocess.run(
         [sys.executable, "-c", probe], cwd=tmp_path, capture_output=True, text=True, check=True
     )
@@ -78,3 +83,22 @@ def test_lazy_names_resolve_or_fail_like_attributes(name):
         from ratslam_graph.backends import gtsam_backend
 
         assert getattr(backends, name) is getattr(gtsam_backend, name)
+
+
+def test_the_pipeline_and_the_cli_import_no_plotting_or_image_library(tmp_path):
+    code = "from torchratslam.pipeline import RatSLAM\nimport torchratslam.cli\n"
+    assert _loaded_after(code, tmp_path, PLOTTING) == set()
+
+
+def test_a_run_in_memory_loads_no_plotting_or_image_library(tmp_path):
+    code = """
+import numpy as np
+from torchratslam import RatSLAM, load_config
+
+slam = RatSLAM(load_config("irat"))
+rng = np.random.default_rng(0)
+for _ in range(3):
+    slam.step(rng.integers(0, 255, (120, 160), dtype=np.uint8), (0.1, 0.01, 0.1))
+assert slam.frame_index == 3, slam.frame_index
+"""
+    assert _loaded_after(code, tmp_path, PLOTTING) == set()
