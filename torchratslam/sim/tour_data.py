@@ -25,10 +25,12 @@
   times in both directions.
 * ``bicocca_like`` (MBARAM, Rawseeds Bicocca stand-in): two 30 x 20 m buildings, each a
   3 m ring corridor round a core, joined by a 10 m passage; a 197 m figure-of-eight lap at
-  1 m/s, 5 Hz, front and rear lasers on.
+  1 m/s, 5 Hz, front and rear lasers on (option ``frames``: a drive of that many frames,
+  lapping the figure of eight).
 * ``bovisa_like`` (MBARAM, Rawseeds Bovisa stand-in): a 120 x 80 m campus of six buildings
   behind a low fence; a 428 m lap round the ring road and down the middle road at
-  1.5 m/s, 5 Hz, front and rear lasers on.
+  1.5 m/s, 5 Hz, front and rear lasers on (option ``frames``: a drive of that many
+  frames, lapping the route).
 """
 
 from __future__ import annotations
@@ -489,8 +491,8 @@ _BICOCCA_CABINETS = (
 BICOCCA_LIKE = TourSpec(
     name="bicocca_like",
     description="Rawseeds indoor stand-in: two ring corridors joined by a passage, lasers on",
-    options={"speed": 1.0, "hz": 5.0},
-    positive=(("speed", 0.0), ("hz", 0.0)),
+    options={"speed": 1.0, "hz": 5.0, "frames": None},
+    positive=(("speed", 0.0), ("hz", 0.0), ("frames", 1.0)),
     world=WorldSpec(
         walls=(
             Polyline(
@@ -557,8 +559,8 @@ BICOCCA_LIKE = TourSpec(
 BOVISA_LIKE = TourSpec(
     name="bovisa_like",
     description="Rawseeds outdoor stand-in: a campus of six buildings, lasers on",
-    options={"speed": 1.5, "hz": 5.0},
-    positive=(("speed", 0.0), ("hz", 0.0)),
+    options={"speed": 1.5, "hz": 5.0, "frames": None},
+    positive=(("speed", 0.0), ("hz", 0.0), ("frames", 1.0)),
     world=WorldSpec(
         walls=(
             Polyline(((0, 0), (120, 0), (120, 80), (0, 80)), height=1.5),
