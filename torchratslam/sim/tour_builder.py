@@ -194,7 +194,10 @@ def _read(spec: TourSpec, seed: int, o: CommonOptions, own: dict[str, Any]) -> _
             n = int(own["frames"])
         else:
             ds = own["speed"] / hz
-            n = (round if s.count == "round" else int)(s.laps * route.length / ds) + 1
+            if own.get("frames") is not None:  # a drive of this many frames, lapping on
+                n = int(own["frames"])
+            else:
+                n = (round if s.count == "round" else int)(s.laps * route.length / ds) + 1
         if isinstance(s.start, LapFraction):
             start = round(float(own[s.start.option]) * own["frames_per_lap"])
             if not plan[-1][3] - 1 < start < s.start.high * own["frames_per_lap"]:

@@ -25,10 +25,12 @@
   times in both directions.
 * ``bicocca_like`` (MBARAM, Rawseeds Bicocca stand-in): two 30 x 20 m buildings, each a
   3 m ring corridor round a core, joined by a 10 m passage; a 197 m figure-of-eight lap at
-  1 m/s, 5 Hz, front and rear lasers on.
+  1 m/s, 5 Hz, front and rear lasers on (option ``frames``: a drive of that many frames,
+  lapping the figure of eight).
 * ``bovisa_like`` (MBARAM, Rawseeds Bovisa stand-in): a 120 x 80 m campus of six buildings
   behind a low fence; a 428 m lap round the ring road and down the middle road at
-  1.5 m/s, 5 Hz, front and rear lasers on.
+  1.5 m/s, 5 Hz, front and rear lasers on (option ``frames``: a drive of that many
+  frames, lapping the route).
 """
 
 from __future__ import annotations
@@ -55,6 +57,7 @@ __all__ = [
     "BICOCCA_LIKE",
     "BOVISA_LIKE",
     "IRAT_LIKE",
+    "LAB_CORRIDOR",
     "LAB_TOUR",
     "LOOP",
     "SUBURB",
@@ -421,6 +424,55 @@ LOOP = TourSpec(
     clearance=0.7,
 )
 
+# MBARAM's robot corridor (Section 3.4): one 40 x 5 m laboratory corridor, driven down
+# one side and back the other (a lap: 117 s, 585 frames at 5 Hz; the paper's robot
+# received 1146-1200 scans a loop at 10 Hz, 115-120 s), furniture along both walls
+LAB_CORRIDOR = TourSpec(
+    name="lab_corridor",
+    description="MBARAM's robot corridor: one 40 x 5 m corridor driven down and back, lasers on",
+    options={"laps": 10.0, "frames": None, "hz": 5.0},
+    positive=(("laps", 0.0), ("hz", 0.0), ("frames", 1.0)),
+    world=WorldSpec(
+        walls=(
+            Polyline(((0, 0), (40, 0), (40, 5), (0, 5))),
+            # cabinets, benches, door frames and a fire hose box at irregular places
+            Box(3.5, 0.25, 1.6, 0.5, height=1.8),
+            Box(9.0, 0.2, 0.4, 0.4, height=2.2),
+            Box(14.5, 0.3, 2.4, 0.6, height=0.9),
+            Box(21.0, 0.2, 0.4, 0.4, height=2.2),
+            Box(27.5, 0.25, 1.0, 0.5, height=1.8),
+            Box(35.0, 0.35, 3.0, 0.7, height=0.8),
+            Box(6.0, 4.75, 2.0, 0.5, height=1.8),
+            Box(12.0, 4.8, 0.4, 0.4, height=2.2),
+            Box(18.5, 4.7, 1.2, 0.6, height=1.2),
+            Box(25.0, 4.8, 0.4, 0.4, height=2.2),
+            Box(31.0, 4.7, 2.6, 0.6, height=0.9),
+            Box(38.0, 4.75, 1.0, 0.5, height=1.8),
+            Box(39.7, 2.5, 0.6, 1.2, height=1.5),
+            Box(0.3, 1.8, 0.6, 0.8, height=1.5),
+        ),
+        wall_height=2.5,
+    ),
+    routes={"corridor": PolygonRoute(((2, 1.5), (38, 1.5), (38, 3.5), (2, 3.5)), radius=1.0)},
+    sessions=(SessionSpec("session1", "corridor"),),
+    spacing=Spacing("laps", frames_per=585, laps_per=1),
+    camera=CameraSpec("panoramic", width=256, height=64, cam_height=1.0),
+    noise=NoiseSpec(
+        scale_error=0.02,
+        rot_scale_error=0.008,
+        heading_bias=0.001,
+        trans_noise=0.02,
+        rot_noise=0.02,
+    ),
+    lasers=True,
+    main_route="corridor",
+    obstacle_size=0.5,
+    obstacle_offset=0.8,
+    pedestrian_offset=0.5,
+    obstacle_height=1.2,
+    clearance=0.5,
+)
+
 SUBURB = TourSpec(
     name="suburb",
     description=(
@@ -489,8 +541,8 @@ _BICOCCA_CABINETS = (
 BICOCCA_LIKE = TourSpec(
     name="bicocca_like",
     description="Rawseeds indoor stand-in: two ring corridors joined by a passage, lasers on",
-    options={"speed": 1.0, "hz": 5.0},
-    positive=(("speed", 0.0), ("hz", 0.0)),
+    options={"speed": 1.0, "hz": 5.0, "frames": None},
+    positive=(("speed", 0.0), ("hz", 0.0), ("frames", 1.0)),
     world=WorldSpec(
         walls=(
             Polyline(
@@ -557,8 +609,8 @@ BICOCCA_LIKE = TourSpec(
 BOVISA_LIKE = TourSpec(
     name="bovisa_like",
     description="Rawseeds outdoor stand-in: a campus of six buildings, lasers on",
-    options={"speed": 1.5, "hz": 5.0},
-    positive=(("speed", 0.0), ("hz", 0.0)),
+    options={"speed": 1.5, "hz": 5.0, "frames": None},
+    positive=(("speed", 0.0), ("hz", 0.0), ("frames", 1.0)),
     world=WorldSpec(
         walls=(
             Polyline(((0, 0), (120, 0), (120, 80), (0, 80)), height=1.5),
@@ -626,6 +678,7 @@ TOUR_SPECS: dict[str, TourSpec] = {
         IRAT_LIKE,
         NEW_COLLEGE,
         LOOP,
+        LAB_CORRIDOR,
         SUBURB,
         BICOCCA_LIKE,
         BOVISA_LIKE,

@@ -69,7 +69,8 @@ def get_tour(name: str, *, seed: int = 0, **options) -> Tour:
     """Build a tour by name.
 
     Args:
-        name: one of ``TOURS`` (virtual_tour, lab_tour, irat_like, loop, suburb).
+        name: one of ``TOURS`` (virtual_tour, lab_tour, irat_like, loop, lab_corridor,
+            suburb, ...).
         seed: seed of the textures, odometry noise and obstacles.
         **options: common options (module docstring) and the tour's own (``hz``,
             ``speed``, ``frames_per_lap``, ``laps``, ``frames``).

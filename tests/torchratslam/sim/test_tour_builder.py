@@ -15,8 +15,9 @@ SMALL = {
     "lab_tour": {"speed": 1.0},
     "irat_like": {"speed": 0.8},
     "loop": {"laps": 1.0, "frames": 120},
+    "lab_corridor": {"laps": 1.0, "frames": 120},
     "suburb": {"blocks": 2, "frames": 200},
-    "bicocca_like": {"hz": 1.0},
+    "bicocca_like": {"hz": 1.0, "frames": 450},  # 2.3 laps of the figure of eight
     "bovisa_like": {"hz": 0.5},
     "new_college": {"speed": 2.0},
 }
@@ -72,7 +73,7 @@ def test_tour_data_round_trips_through_the_builder(name):
             ds = own["laps"] * route.length / (n - 1)
         else:
             ds = own["speed"] / own["hz"]
-            n = own["frames"] if kind == "frames" else None
+            n = own["frames"] if kind == "frames" else own.get("frames")
         if n is None:
             exact = sspec.laps * route.length / ds
             n = (round(exact) if sspec.count == "round" else int(exact)) + 1
