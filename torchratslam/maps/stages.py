@@ -34,6 +34,9 @@ from torchratslam.pose_cells.state import PoseCellState
 __all__ = ["MapParts", "compose", "decompose", "experience_map_record", "experience_map_state"]
 
 _LV_KNOWN = {"templates", "means", "frames", "current_id", "previous_id", "template_shape"}
+PC_OWN = "pc_own."
+"""Prefix of the pose cells' own experiences when they are not the map's (the activity rule)."""
+
 _PC_KNOWN = {
     "activity",
     "template_pc",
@@ -138,6 +141,13 @@ def compose(
     """
     lv, pc, em = local_view, pose_cells, experience_map
     ends, vals = em.link_ends, em.link_values
+    own = pc.exp_pc.shape[0] != em.poses.shape[0]
+    if own:
+        # exp_create_rule="activity": the map learns its experiences from their activity
+        # and the pose cells keep their own list (their distance rule gives only the
+        # action's angle); the map's cells are the map's, the pose cells' are kept apart
+        pc_own = (pc.exp_pc, pc.exp_template, pc.current_exp)
+        pc = pc.replace(exp_pc=em.pc, exp_template=em.template_id, current_exp=None)
     state = MapState(
         config=config,
         templates=np.ascontiguousarray(lv.templates),
@@ -176,6 +186,11 @@ def compose(
         state.extra["exp:pc_template"] = pc.exp_template
     if pc.current_exp is not None and pc.current_exp != state.current_exp:
         state.scalars["pc.current_exp"] = int(pc.current_exp)
+    if own:
+        state.extra[PC_OWN + "exp_pc"] = np.asarray(pc_own[0], np.float64)
+        state.extra[PC_OWN + "exp_template"] = np.asarray(pc_own[1], np.int64)
+        if pc_own[2] is not None:
+            state.scalars[PC_OWN + "current_exp"] = int(pc_own[2])
     _split_extras("lv", lv.to_dict(), _LV_KNOWN, state)
     _split_extras("pc", pc.to_dict(), _PC_KNOWN, state)
     _split_extras("em", em.to_dict(), _EM_KNOWN, state)
@@ -247,16 +262,20 @@ def decompose(state: MapState) -> MapParts:
     )
     lv.setdefault("frame_counter", int(state.frame_index))
     current_exp = int(state.scalars.get("pc.current_exp", state.current_exp))
+    exp_pc = state.exp_pc
+    exp_template = state.extra.get("exp:pc_template", state.exp_template)
+    if PC_OWN + "exp_pc" in state.extra:  # the pose cells' own experiences (activity rule)
+        exp_pc = state.extra[PC_OWN + "exp_pc"]
+        exp_template = state.extra[PC_OWN + "exp_template"]
+        current_exp = int(state.scalars.get(PC_OWN + "current_exp", len(exp_pc) - 1))
     pc = _collect("pc", state)
     pc.update(
         {
             "activity": state.activity.copy(),
             "template_pc": state.template_pc.copy(),
             "template_decay": state.template_decay.copy(),
-            "exp_pc": state.exp_pc.copy(),
-            "exp_template": np.array(
-                state.extra.get("exp:pc_template", state.exp_template), dtype=np.int64, copy=True
-            ),
+            "exp_pc": np.array(exp_pc, np.float64, copy=True).reshape(-1, 3),
+            "exp_template": np.array(exp_template, dtype=np.int64, copy=True),
             "current_exp": current_exp,
             "current_vt": int(state.current_vt),
             "prev_vt": int(state.prev_vt),

@@ -36,7 +36,7 @@ from torchratslam.navigation.plots import plot_goal_memory, plot_pc_path
 from torchratslam.navigation.robot import MappingRobot
 from torchratslam.sim.office.builder import build_office
 
-__all__ = ["COLLISION_M", "EXPERIMENTS"]
+__all__ = ["COLLISION_M", "EXPERIMENTS", "goal_memory_explore", "summary"]
 
 COLLISION_M = 2.0
 """A cell whose visits lie more than this apart (m, the diagonal of the box round them)
@@ -57,7 +57,19 @@ def _explore(robot: MappingRobot, agent: GoalMemoryAgent, s: _Setup) -> list[Goa
             robot.explore(50.0)
 
 
-def _summary(results: list[Trial]) -> dict[str, Any]:
+def goal_memory_explore(
+    office: Any, s: _Setup, dims: tuple[int, int], seed: int
+) -> tuple[MappingRobot, GoalMemoryAgent, list[Goal]]:
+    """``edge/goal-recall``'s exploration (the paper's map, ``dims`` pose cells) with
+    goal memory learning from it, and the goals marked on goal memory:
+    ``(robot, agent, goals)``."""
+    robot = MappingRobot(_config(dims, PAPER_MAP), office=office, seed=seed)
+    agent = GoalMemoryAgent(robot)
+    return robot, agent, _explore(robot, agent, s)
+
+
+def summary(results: list[Trial]) -> dict[str, Any]:
+    """Goals reached, the median path / shortest over those reached, and each trial."""
     ratios = [t.path_m / max(t.shortest_m, 1e-9) for t in results if t.reached]
     return {
         "reached": sum(t.reached for t in results),
@@ -84,9 +96,7 @@ def _goal_memory(ctx: ExperimentContext) -> Report:
     figures: list[str] = []
     for label, dims in s.matrices:
         t0 = time.perf_counter()
-        robot = MappingRobot(_config(dims, PAPER_MAP), office=office, seed=ctx.seed)
-        agent = GoalMemoryAgent(robot)
-        goals = _explore(robot, agent, s)
+        robot, agent, goals = goal_memory_explore(office, s, dims, ctx.seed)
         pc, truth = robot.slam.pc_log(), robot.trajectory()
         hit, cells = collisions(pc[:, :2], truth[:, :2], COLLISION_M)
         gm = agent.memory
@@ -116,8 +126,8 @@ def _goal_memory(ctx: ExperimentContext) -> Report:
             "packet_jumps": gm.jumps,
             "goal_memory_links": gm.num_links,
             "cells_reachable_from_start": int(reach.sum()),
-            "goal_memory": _summary(gm_results),
-            "experience_map": _summary(em_results),
+            "goal_memory": summary(gm_results),
+            "experience_map": summary(em_results),
             "wall_s": round(time.perf_counter() - t0, 1),
         }
     labels = [m for m, _ in s.matrices]

@@ -28,6 +28,17 @@ def test_goal_recall_quick_reaches_goals_on_a_small_floor(tmp_path):
     for t in trials:
         if t["reached"]:
             assert 0.5 * t["shortest_m"] <= t["path_m"] <= 6.0 * t["shortest_m"]
+    # goal memory, the paper's baseline, ran the same exploration to the same goals: its
+    # first trial starts where the experience map's did
+    gm = d["details"]["goal_memory"]
+    assert set(gm) == {"100x40x36", "40x20x36"}
+    for m, g in gm.items():
+        ours = [t for t in trials if t["matrix"] == m]
+        assert len(g["trials"]) == len(ours) == g["goals"]
+        assert g["trials"][0]["shortest_m"] == ours[0]["shortest_m"]
+        assert 0 <= g["reached"] <= g["goals"]
+    names = [r["name"] for r in d["rows"]]
+    assert "goals reached by goal memory (40x20x36 matrix, the paper's baseline)" in names
     for f in d["figures"]:
         assert (tmp_path / f).stat().st_size > 0
 
