@@ -143,6 +143,19 @@ def _associate(t_ref: np.ndarray, t_est: np.ndarray, max_diff: float) -> tuple[n
     return order[j[keep]], np.flatnonzero(keep)
 
 
+TUM_ATE_OVER = "poses matched to ground truth by nearest timestamp within 0.01 s"
+"""What a ``--tum`` ATE is taken over (evo's association), beside its alignment."""
+TUM_ATE_ALIGNMENT = "rigid, no scale (evo_ape -a)"
+
+
+def tum_matched(groundtruth: str | Path, estimate: str | Path, *, max_diff: float = 0.01) -> int:
+    """How many poses of ``estimate`` have a ground-truth pose within ``max_diff`` seconds:
+    the poses :func:`tum_ate` is taken over."""
+    t_g, _ = read_tum(groundtruth)
+    t_e, _ = read_tum(estimate)
+    return int(_associate(t_g, t_e, max_diff)[0].size)
+
+
 def tum_ate(
     groundtruth: str | Path, estimate: str | Path, *, max_diff: float = 0.01, align: bool = True
 ) -> float:

@@ -62,6 +62,8 @@ class RunExtras:
         loaded: the stored maps the run localised in.
         resumed_at_frame: the frame a resumed run went on from.
         tum: the TUM files written, by estimate.
+        tum_ate_poses: what the TUM ATEs are taken over: their alignment, and per estimate
+            the poses matched to ground truth (under 3: that ATE is undefined, None).
         ate_experience_rmse_m: the ATE of ``tum_experience.txt``.
         ate_frame_rmse_m: the ATE of ``tum_frame.txt``.
     """
@@ -72,6 +74,7 @@ class RunExtras:
     loaded: tuple[str, ...] | None = None
     resumed_at_frame: int | None = None
     tum: dict[str, str] | None = None
+    tum_ate_poses: dict[str, Any] | None = None
     ate_experience_rmse_m: float | None = None
     ate_frame_rmse_m: float | None = None
 
@@ -102,6 +105,8 @@ class RunMetrics:
         loaded: the stored maps the run localised in.
         resumed_at_frame: the frame a resumed run went on from.
         tum: the TUM files written, by estimate.
+        tum_ate_poses: what the TUM ATEs are taken over: their alignment, and per estimate
+            the poses matched to ground truth (under 3: that ATE is undefined, None).
         ate_experience_rmse_m: the ATE of ``tum_experience.txt``.
         ate_frame_rmse_m: the ATE of ``tum_frame.txt``.
         ate_rmse_m: the map's ATE (with ground truth).
@@ -141,6 +146,7 @@ class RunMetrics:
     loaded: tuple[str, ...] | None = None
     resumed_at_frame: int | None = None
     tum: dict[str, str] | None = None
+    tum_ate_poses: dict[str, Any] | None = None
     ate_experience_rmse_m: float | None = None
     ate_frame_rmse_m: float | None = None
     ate_rmse_m: float | None = None
@@ -270,6 +276,7 @@ def _metrics(
         loaded=extras.loaded,
         resumed_at_frame=extras.resumed_at_frame,
         tum=extras.tum,
+        tum_ate_poses=extras.tum_ate_poses,
         ate_experience_rmse_m=extras.ate_experience_rmse_m,
         ate_frame_rmse_m=extras.ate_frame_rmse_m,
         ate_rmse_m=None if ate is None else float(ate),
@@ -390,15 +397,26 @@ def write_unmerged(
 def write_tum(slam: Any, out: Path, recorder: Any, data: Any) -> dict[str, Any]:
     """The TUM files of ``--tum``; returns their :class:`RunExtras` fields (the files and
     the ATE of each estimate on them)."""
-    from torchratslam.eval.tum import tum_ate, write_tum_files
+    from torchratslam.eval.tum import (
+        TUM_ATE_ALIGNMENT,
+        TUM_ATE_OVER,
+        tum_ate,
+        tum_matched,
+        write_tum_files,
+    )
 
     table = data.groundtruth() if isinstance(data, GroundTruthSource) else None
     files = write_tum_files(slam, out, recorder=recorder, groundtruth=table)
     fields: dict[str, Any] = {"tum": {k: p.name for k, p in files.items()}}
-    if "groundtruth" in files and slam.trajectory().shape[0] >= 2:
+    if "groundtruth" in files:
+        poses: dict[str, Any] = {"alignment": TUM_ATE_ALIGNMENT, "over": TUM_ATE_OVER}
         for name in ("experience", "frame"):
             if name in files:
-                fields[f"ate_{name}_rmse_m"] = tum_ate(files["groundtruth"], files[name])
+                n = tum_matched(files["groundtruth"], files[name])
+                poses[name] = n  # an ATE needs 3 matched poses: under 3 it is undefined
+                if n >= 3:
+                    fields[f"ate_{name}_rmse_m"] = tum_ate(files["groundtruth"], files[name])
+        fields["tum_ate_poses"] = poses
     return fields
 
 

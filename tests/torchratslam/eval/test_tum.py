@@ -149,6 +149,16 @@ def _evo_ate(gt: Path, est: Path) -> float:
     return float(ape.get_statistic(metrics.StatisticsType.rmse))
 
 
+def _stamps(path: Path) -> list[float]:
+    return [float(line.split()[0]) for line in path.read_text().splitlines() if line[:1] != "#"]
+
+
+def _matched(gt: Path, est: Path) -> int:
+    """The estimate's poses with a ground-truth pose within 0.01 s, counted one by one."""
+    t_gt = _stamps(gt)
+    return sum(1 for t in _stamps(est) if min(abs(t - g) for g in t_gt) <= 0.01)
+
+
 def test_evo_ate_equals_the_projects(tum_run):
     out = tum_run
     m = json.loads((out / "metrics.json").read_text())
@@ -165,6 +175,12 @@ def test_evo_ate_equals_the_projects(tum_run):
         assert m[f"ate_{name}_rmse_m"] == ours
     # the experience estimate is the run's trajectory: same ATE as metrics.json's
     assert m["ate_experience_rmse_m"] == pytest.approx(m["ate_rmse_m"], abs=1e-9)
+    # the TUM ATEs say what they are taken over: their alignment and the matched poses,
+    # counted here by a loop over the files' timestamps
+    said = m["tum_ate_poses"]
+    assert "evo_ape -a" in said["alignment"] and "0.01 s" in said["over"]
+    for name in ("experience", "frame"):
+        assert said[name] == _matched(gt, out / f"tum_{name}.txt") >= 3
     assert m["ate_frame_rmse_m"] != m["ate_experience_rmse_m"]
 
 
@@ -183,3 +199,16 @@ def test_evo_ape_command_reads_the_files(tum_run):
     lines = res.stdout.splitlines()
     rmse = next(float(s.split()[1]) for s in lines if s.strip().startswith("rmse"))
     assert rmse == pytest.approx(tum_ate(gt, est), abs=1e-6)
+
+
+def test_a_tum_ate_under_three_matched_poses_is_undefined(tmp_path):
+    cfg = tmp_path / "small.yaml"
+    cfg.write_text(SMALL)
+    out = tmp_path / "out"
+    args = ["run", "--config", str(cfg), "--data", SIM, "--out", str(out), "--no-progress"]
+    assert main([*args, "--tum", "--max-frames", "2"]) == 0
+    m = json.loads((out / "metrics.json").read_text())
+    gt = out / "tum_groundtruth.txt"
+    for name in ("experience", "frame"):
+        assert m["tum_ate_poses"][name] == _matched(gt, out / f"tum_{name}.txt") < 3
+    assert "ate_frame_rmse_m" not in m and "ate_experience_rmse_m" not in m
