@@ -10,7 +10,7 @@ DESCRIPTION = """Run a parameter sweep: every combination of the sweep file's pa
 values x datasets x seeds x backends, one RatSLAM run each.
 
 OUT receives results.csv (one row per run: every swept parameter, status, error, frames,
-templates, experiences, links, ate_m, dead_reckoning_ate_m, wall_s, fps, ms per frame
+templates, experiences, links, ate_m, dead_reckoning_ate_m, ate_frames, wall_s, fps, ms per frame
 per module; also results.parquet when pyarrow is installed), rewritten atomically after
 every finished run, and figures/ (each metric against each parameter, speed against
 accuracy). A failed run records its error and the sweep goes on. A stopped sweep (Ctrl-C,

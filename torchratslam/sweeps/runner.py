@@ -13,6 +13,8 @@ column                     meaning
 ``links``                  experience-map links at the end
 ``ate_m``                  ATE (m) of the experience trajectory vs ground truth
 ``dead_reckoning_ate_m``   ATE (m) of the integrated odometry alone
+``ate_frames``             frames both ATEs are taken over (SE(2)-aligned; a map pose and
+                           a ground-truth pose; under 3 both ATEs are nan, undefined)
 ``wall_s``                 wall-clock seconds of the run (timing)
 ``fps``                    frames per second (timing)
 ``ms_<module>``            mean ms per frame of odometry, local_view, pose_cells,
@@ -65,6 +67,7 @@ METRICS = (
     "links",
     "ate_m",
     "dead_reckoning_ate_m",
+    "ate_frames",
     "wall_s",
     "fps",
     *(f"ms_{m}" for m in MODULES),
@@ -125,9 +128,12 @@ def _metrics(slam: Any, result: Any, data: Any, wall_s: float, batch: int) -> di
         if table is not None and not len(table):
             table = None
     ate = dr = None
+    n_gt = 0
     if slam.groundtruth_poses() is not None or table is not None:
-        ate = slam.ate(table)
-        dr = slam.dead_reckoning_ate(table)
+        n_gt = slam.history.ate_frames(slam.experience_map.poses, table)
+        if n_gt >= 3:  # an ATE needs 3 poses: under 3 it is undefined (nan)
+            ate = slam.ate(table)
+            dr = slam.dead_reckoning_ate(table)
     timings = result.timings
     row: dict[str, Any] = {
         "status": "ok",
@@ -138,6 +144,7 @@ def _metrics(slam: Any, result: Any, data: Any, wall_s: float, batch: int) -> di
         "links": int(result.links),
         "ate_m": math.nan if ate is None else float(ate),
         "dead_reckoning_ate_m": math.nan if dr is None else float(dr),
+        "ate_frames": int(n_gt),
         "wall_s": float(wall_s),
         "fps": float(result.frames / wall_s) if wall_s > 0 else 0.0,
         "batch": int(batch),

@@ -231,8 +231,9 @@ def tune(
     datasets = [data] if isinstance(data, str) else list(data)
     if not datasets:
         raise ConfigError("tune: give at least one dataset, e.g. sim:loop")
-    if metric not in METRICS or metric in ("batch",):
-        raise ConfigError(f"tune: unknown metric {metric!r} (valid: {', '.join(METRICS[:-1])})")
+    if metric not in METRICS or metric in ("batch", "ate_frames"):
+        valid = ", ".join(m for m in METRICS if m not in ("batch", "ate_frames"))
+        raise ConfigError(f"tune: unknown metric {metric!r} (valid: {valid})")
     if trials < 1:
         raise ConfigError(f"tune: trials must be >= 1, got {trials}")
     space = [parse_range(k, v) for k, v in (params or DEFAULT_SPACE).items()]

@@ -85,6 +85,9 @@ def test_table_has_every_parameter_and_metric(reference):
             }
             assert t[0.08] <= t[0.05]
     assert len({r["dead_reckoning_ate_m"] for r in rows}) == 2  # one per seed
+    # each ATE says how many frames it is over: a simulated run has ground truth and a
+    # map pose on every frame
+    assert all(r["ate_frames"] == r["frames"] >= 3 for r in rows)
     figs = sorted(p.name for p in (out / "figures").glob("*.png"))
     assert figs == [
         "metrics_vs_pc_vt_inject_energy.png",
