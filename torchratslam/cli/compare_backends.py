@@ -65,20 +65,26 @@ def register(subparsers: Any) -> argparse.ArgumentParser:
         help="relaxation passes of the alpha backends (least-squares backends optimise to "
         "convergence), e.g. --passes 250",
     )
+    p.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="replace an existing --json file (never another command's file or an input), "
+        "e.g. --overwrite",
+    )
     p.set_defaults(func=main)
     return p
 
 
 def main(args: argparse.Namespace) -> int:
+    from ratslam_graph.out_checks import check_out_file
     from torchratslam.experiments.compare_backends import (
         format_table,
         run_comparison,
         write_rows_json,
     )
-    from torchratslam.experiments.out_checks import check_out_file
 
     inputs = [args.map] + ([args.groundtruth] if args.groundtruth else [])
-    check_out_file(args.json, inputs=inputs, flag=("--json", "json"))
+    check_out_file(args.json, inputs=inputs, flag=("--json", "json"), overwrite=args.overwrite)
     names = tuple(s.strip() for s in args.backends.split(",") if s.strip())
     pg, rows = run_comparison(args.map, names, groundtruth=args.groundtruth, passes=args.passes)
     print(
@@ -92,5 +98,5 @@ def main(args: argparse.Namespace) -> int:
             f"{np.asarray(pg.poses).shape[0]} nodes with ground truth ({ate['ate_over']})"
         )
     if args.json:
-        write_rows_json(rows, args.json)
+        write_rows_json(rows, args.json, inputs=inputs, overwrite=args.overwrite)
     return 0

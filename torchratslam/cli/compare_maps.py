@@ -4,6 +4,7 @@ rigid transform, ATE and the overlay figure of two saved maps."""
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 from typing import Any
 
 DESCRIPTION = """Compare two saved maps as the multisession paper does (its Figs. 10, 14,
@@ -69,25 +70,41 @@ def register(subparsers: Any) -> argparse.ArgumentParser:
         help="also write the report (every number, the roles, the paths) as JSON, "
         "e.g. --json out/compare_maps.json",
     )
+    p.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="replace an existing --figure or --json file (never another command's file "
+        "or one of the maps), e.g. --overwrite",
+    )
     p.set_defaults(func=main)
     return p
 
 
 def main(args: argparse.Namespace) -> int:
+    from ratslam_graph.out_checks import check_out_file
+    from torchratslam.errors import InputError
     from torchratslam.experiments.compare_maps import compare_maps, summary_text, write_json
-    from torchratslam.experiments.out_checks import check_out_file
 
+    if args.json and args.figure and Path(args.json).resolve() == Path(args.figure).resolve():
+        raise InputError(f"--json and --figure are the same file {args.json}; give two paths")
     for flag, target in (("--json", args.json), ("--figure", args.figure)):
-        check_out_file(target, inputs=(args.a, args.b), flag=(flag, flag[2:]))
+        check_out_file(
+            target, inputs=(args.a, args.b), flag=(flag, flag[2:]), overwrite=args.overwrite
+        )
     config = None
     if args.config:
         from torchratslam.config import load_config
 
         config = load_config(args.config)
     report = compare_maps(
-        args.a, args.b, config=config, groundtruth=args.groundtruth, figure=args.figure
+        args.a,
+        args.b,
+        config=config,
+        groundtruth=args.groundtruth,
+        figure=args.figure,
+        overwrite=args.overwrite,
     )
     print(summary_text(report))
     if args.json:
-        print(f"json: {write_json(report, args.json)}")
+        print(f"json: {write_json(report, args.json, overwrite=args.overwrite)}")
     return 0

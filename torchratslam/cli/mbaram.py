@@ -119,20 +119,13 @@ def _parse_sets(items: list[str]) -> dict[str, str]:
 
 def main(args: argparse.Namespace) -> int:
     """Run the subcommand."""
-    from torchratslam.errors import InputError
     from torchratslam.experiments.mbaram_tour import (
         MBARAMTourOptions,
         run_experiment,
         summary_line,
     )
-    from torchratslam.experiments.out_checks import check_out_dir
 
-    # OUT: new, empty, or an earlier MBARAM run's (replaced only with --overwrite)
-    if check_out_dir(args.out, what="MBARAM run", marks=("state.npz",)) and not args.overwrite:
-        raise InputError(
-            f"{args.out} holds a finished MBARAM run; choose another --out, or replace it "
-            "with --overwrite"
-        )
+    # run_experiment checks OUT first: new, empty, or an earlier MBARAM run's (--overwrite)
     tour = run_experiment(
         args.data,
         args.out,
@@ -149,6 +142,7 @@ def main(args: argparse.Namespace) -> int:
             progress=not args.no_progress,
             mapper=args.mapper,
         ),
+        overwrite=args.overwrite,
     )
     print(summary_line(args.data, tour.metrics, Path(args.out)))
     return 0

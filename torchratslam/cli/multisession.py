@@ -163,31 +163,20 @@ def register(subparsers: Any) -> argparse.ArgumentParser:
     return p
 
 
-RUNNING = "running.json"
-# What a finished multisession run leaves in OUT: one experiment's report, a seed table.
-FINISHED = ("report.json", "seeds.json")
-
-
 class _Running:
     """OUT/running.json while the experiment works: a stopped one is never silently
     replaced (refused unless ``overwrite``)."""
 
     def __init__(self, out: Path, overwrite: bool) -> None:
         from torchratslam.errors import InputError
-        from torchratslam.experiments.out_checks import check_out_dir
+        from torchratslam.experiments.multisession_tour import RUNNING, check_out
 
         self.path = out / RUNNING
-        check_out_dir(out, what="multisession run", marks=(RUNNING, *FINISHED))
+        check_out(out, overwrite)
         if self.path.exists() and not overwrite:
             raise InputError(
                 f"{out} holds a multisession run that did not finish ({RUNNING}); it cannot "
                 "be resumed: start it again with --overwrite, or choose another --out"
-            )
-        done = [n for n in FINISHED if (out / n).is_file()]
-        if done and not overwrite:
-            raise InputError(
-                f"{out} holds a finished multisession run ({done[0]}); choose another --out, "
-                "or replace it with --overwrite"
             )
 
     def __enter__(self) -> _Running:
@@ -349,4 +338,5 @@ def _experiment(
             rerun=args.rerun,
             rerun_save=args.rerun_save,
         ),
+        overwrite=args.overwrite,
     )

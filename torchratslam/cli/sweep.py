@@ -107,11 +107,7 @@ def main(args: argparse.Namespace) -> int:
         raise InputError(f"--workers must be >= 1, got {args.workers}")
     if args.resume and args.overwrite:
         raise InputError("--resume keeps OUT's runs and --overwrite replaces them; give one")
-    out = Path(args.out)
-    from torchratslam.experiments.out_checks import check_out_dir
-
-    # new, empty, or a sweep's own folder (whose table the sweep's own checks judge)
-    check_out_dir(out, what="sweep", marks=("results.csv", "results.parquet"))
+    out = Path(args.out)  # new, empty, or a sweep's own folder: sweep() checks it first
     table = sweep(
         args.file,
         out,

@@ -153,10 +153,6 @@ def main(args: argparse.Namespace) -> int:
         raise InputError(f"--workers must be >= 1, got {args.workers}")
     if args.max_frames is not None and args.max_frames < 1:
         raise InputError(f"--max-frames must be >= 1, got {args.max_frames}")
-    from torchratslam.experiments.out_checks import check_out_dir
-
-    # OUT: new, empty, or this command's study (its own checks say resume or not)
-    check_out_dir(args.out, what="tuning study", marks=("study.journal", "history.csv"))
     params = _pairs(args.param, "--param") or None
     result = tune(
         args.data or "sim:loop",

@@ -6,12 +6,14 @@ each backend, and tabulate time, error and ATE.
 from __future__ import annotations
 
 import json
+from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from ratslam_graph.atomic import atomic_write_text
+from ratslam_graph.out_checks import check_out_file
 from torchratslam.errors import InputError, option
 
 __all__ = [
@@ -188,8 +190,17 @@ def _state(map_path: str | Path) -> Any:
     return state
 
 
-def write_rows_json(rows: list[dict[str, Any]], path: str | Path) -> None:
-    """The rows (without arrays) as JSON at ``path``, written atomically."""
+def write_rows_json(
+    rows: list[dict[str, Any]],
+    path: str | Path,
+    *,
+    inputs: Iterable[str | Path] = (),
+    overwrite: bool = False,
+) -> None:
+    """The rows (without arrays) as JSON at ``path``, written atomically; an existing file
+    is replaced only with ``overwrite`` (never another command's file or one of
+    ``inputs``)."""
+    check_out_file(path, inputs=inputs, flag=("--json", "json"), overwrite=overwrite)
     out = Path(path)
     out.parent.mkdir(parents=True, exist_ok=True)
     payload = [

@@ -22,6 +22,7 @@ from typing import Any
 import numpy as np
 
 from ratslam_graph.atomic import atomic_write_text
+from ratslam_graph.out_checks import check_out_file
 from torchratslam.errors import InputError
 from torchratslam.eval.groundtruth import check_groundtruth_covers
 from torchratslam.eval.icp import compare_icp, libicp_starts
@@ -99,6 +100,7 @@ def compare_maps(
     config: Any = None,
     groundtruth: str | Path | None = None,
     figure: str | Path | None = None,
+    overwrite: bool = False,
 ) -> dict[str, Any]:
     """Compare map A with map B (any supported format): A moved onto B.
 
@@ -108,12 +110,16 @@ def compare_maps(
         config: a ``RatSLAMConfig`` or flat dict (shapes reference-format templates).
         groundtruth: a ground-truth CSV or dataset spec; default: the dataset a
             ``torchratslam run`` OUT directory names in its metrics.json, if any.
-        figure: where to write the overlay figure (PNG); None writes none.
+        figure: where to write the overlay figure (PNG); None writes none. Never one of
+            the maps or a file another command wrote; an existing file only with
+            ``overwrite``.
+        overwrite: replace an existing ``figure``.
 
     Returns:
         JSON-able: ``roles``, ``a`` and ``b`` (path, format, counts, ``ate_rmse_m``),
         ``icp`` (:func:`torchratslam.eval.icp.compare_icp`), ``groundtruth``, ``figure``.
     """
+    check_out_file(figure, inputs=(a, b), flag=("--figure", "figure"), overwrite=overwrite)
     pa, pb = Path(a), Path(b)
     sa, sb = load_state(pa, config), load_state(pb, config)
     for p, s in ((pa, sa), (pb, sb)):
@@ -224,8 +230,16 @@ def summary_text(report: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
-def write_json(report: dict[str, Any], path: str | Path) -> Path:
-    """The report as JSON at ``path`` (parent folders made), written atomically."""
+def write_json(report: dict[str, Any], path: str | Path, *, overwrite: bool = False) -> Path:
+    """The report as JSON at ``path`` (parent folders made), written atomically; an
+    existing file is replaced only with ``overwrite`` (never another command's file or
+    one of the compared maps)."""
+    check_out_file(
+        path,
+        inputs=(report["a"]["path"], report["b"]["path"]),
+        flag=("--json", "json"),
+        overwrite=overwrite,
+    )
     out = Path(path)
     out.parent.mkdir(parents=True, exist_ok=True)
     atomic_write_text(out, json.dumps(report, indent=2) + "\n")

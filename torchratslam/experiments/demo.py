@@ -49,6 +49,7 @@ def run_multisession_demo(
             progress=progress,
             overrides=overrides or {},
         ),
+        overwrite=True,  # the demo's own folder: `make demo` again replaces its last run
     )
     print(report_markdown(result["report"]))
     return out / "report.md"

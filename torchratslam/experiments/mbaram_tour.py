@@ -15,7 +15,8 @@ from typing import Any
 import numpy as np
 
 from ratslam_graph.atomic import atomic_write_text, atomic_write_with
-from torchratslam.errors import ConfigError, InputError
+from ratslam_graph.out_checks import check_out_dir
+from torchratslam.errors import ConfigError, InputError, option
 from torchratslam.messages import Frame
 
 __all__ = [
@@ -227,7 +228,11 @@ def _write_outputs(result: Any, metrics: MBARAMTourMetrics, out: Path) -> None:
 
 
 def run_experiment(
-    data: str, out: str | Path, options: MBARAMTourOptions | None = None
+    data: str,
+    out: str | Path,
+    options: MBARAMTourOptions | None = None,
+    *,
+    overwrite: bool = False,
 ) -> MBARAMTourResult:
     """Map ``options.laps`` laps of the simulated tour ``data``, localise on
     ``options.loc_laps`` more, and write OUT (``metrics.json``, ``state.npz``, and the
@@ -237,15 +242,26 @@ def run_experiment(
         data: the simulator spec ``sim:NAME[/SESSION][?key=value]``.
         out: the output folder.
         options: how to map and localise (default :class:`MBARAMTourOptions`).
+        overwrite: replace an earlier MBARAM run in ``out`` (a folder holding anything
+            else is always refused).
 
     Returns:
         The :func:`~torchratslam.mbaram.run.run_mbaram` result and the metrics written.
 
     Raises:
         ConfigError: bad lap counts or parameters.
-        InputError: not a simulated tour with lasers.
+        InputError: not a simulated tour with lasers; ``out`` holds something else, or
+            an earlier MBARAM run without ``overwrite``.
     """
     import torch
+
+    # OUT: new, empty, or an earlier MBARAM run's (replaced only with overwrite)
+    if check_out_dir(out, what="MBARAM run", marks=("state.npz",)) and not overwrite:
+        raise InputError(
+            f"{out} holds a finished MBARAM run; choose another "
+            f"{option('--out', 'out')}, or replace it with "
+            f"{option('--overwrite', 'overwrite=True')}"
+        )
 
     from torchratslam.mbaram.params import MBARAMParams
     from torchratslam.mbaram.run import run_mbaram

@@ -26,8 +26,9 @@ from typing import Any
 import numpy as np
 
 from ratslam_graph.atomic import atomic_write_text
+from ratslam_graph.out_checks import check_out_dir
 from torchratslam.config import RatSLAMConfig, load_config
-from torchratslam.errors import InputError
+from torchratslam.errors import InputError, option
 from torchratslam.eval.icp import PAPER_ICP_MSE_M2
 from torchratslam.experiments.multisession_report import report_markdown
 from torchratslam.maps.state import MapState
@@ -618,11 +619,36 @@ class MultisessionOptions:
     merge_anchor: str = "template"
 
 
+RUNNING = "running.json"
+"""The command line's lock in OUT while a multisession run works."""
+FINISHED = ("report.json", "seeds.json")
+"""What a finished multisession run leaves in OUT: one experiment's report, a seed table."""
+
+
+def check_out(out: str | Path, overwrite: bool) -> None:
+    """Refuse an OUT holding anything but a multisession run, or a finished one without
+    ``overwrite``.
+
+    Raises:
+        InputError: naming OUT and what it holds.
+    """
+    check_out_dir(out, what="multisession run", marks=(RUNNING, *FINISHED))
+    done = [n for n in FINISHED if (Path(out) / n).is_file()]
+    if done and not overwrite:
+        raise InputError(
+            f"{out} holds a finished multisession run ({done[0]}); choose another "
+            f"{option('--out', 'out')}, or replace it with "
+            f"{option('--overwrite', 'overwrite=True')}"
+        )
+
+
 def run_experiment(
     config: Any,
     tour_spec: str,
     out: str | Path,
     options: MultisessionOptions | None = None,
+    *,
+    overwrite: bool = False,
 ) -> dict[str, Any]:
     """Run the experiment on a tour and write OUT (what the CLI and the demo call):
     ``report.json``, ``report.md``, the figures and the session maps.
@@ -634,10 +660,16 @@ def run_experiment(
             (``sim:NAME?key=value&...``, :func:`parse_tour_spec`).
         out: the output folder.
         options: the run's options (default: :class:`MultisessionOptions`).
+        overwrite: replace a finished multisession run in ``out`` (a folder holding
+            anything else is always refused).
 
     Returns:
         :func:`run_tour`'s result (``report`` and ``data``).
+
+    Raises:
+        InputError: ``out`` holds something else, or a finished run without ``overwrite``.
     """
+    check_out(out, overwrite)
     from torchratslam.sim import get_tour
     from torchratslam.viz.multisession import write_figures
 

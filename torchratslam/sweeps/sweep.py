@@ -14,6 +14,7 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
+from ratslam_graph.out_checks import check_out_dir
 from torchratslam.errors import InputError, option
 from torchratslam.sweeps.executors import Executor, make_executor
 from torchratslam.sweeps.runner import batch_key
@@ -181,14 +182,14 @@ def sweep(
             or (without ``resume`` or ``overwrite``) a table in ``out`` holding a stopped
             sweep or another sweep's runs.
     """
+    if out is not None:  # new, empty, or a sweep's own (whose table is judged below)
+        check_out_dir(out, what="sweep", marks=(TABLE, "results.parquet"))
     spec = _spec(sweep_file)
     runs = spec.runs()
     cols = columns(list(spec.parameters))
     out_dir = Path(out) if out is not None else None
     table = out_dir / TABLE if out_dir is not None else None
     if out_dir is not None:
-        if out_dir.exists() and not out_dir.is_dir():
-            raise InputError(f"out {out_dir}: exists and is not a directory")
         out_dir.mkdir(parents=True, exist_ok=True)
     rows: dict[str, dict[str, Any]] = {}
     if resume and table is not None and table.exists():

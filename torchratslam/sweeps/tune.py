@@ -31,6 +31,7 @@ from typing import Any
 import yaml
 
 from ratslam_graph.io import atomic_write_text
+from ratslam_graph.out_checks import check_out_dir
 from torchratslam.config import load_config
 from torchratslam.errors import ConfigError, InputError, option
 from torchratslam.sweeps.executors import Executor, make_executor
@@ -236,6 +237,8 @@ def tune(
         raise ConfigError(f"tune: unknown metric {metric!r} (valid: {valid})")
     if trials < 1:
         raise ConfigError(f"tune: trials must be >= 1, got {trials}")
+    if out is not None:  # new, empty, or a study's own (its storage says resume or not)
+        check_out_dir(out, what="tuning study", marks=("study.journal", "history.csv"))
     space = [parse_range(k, v) for k, v in (params or DEFAULT_SPACE).items()]
     fixed = dict(fixed or {})
     base = load_config(config, **fixed)
@@ -335,16 +338,11 @@ def tune(
             for trial in batch:
                 trows = [rows[r.run_id] for r in runs[trial.number]]
                 failed = [r for r in trows if r.get("status") != "ok"]
-                for key in (
-                    "experiences",
-                    "templates",
-                    "links",
-                    "ate_m",
-                    "dead_reckoning_ate_m",
-                    "wall_s",
-                ):
+                for key in TRIAL_MEANS:
                     vals = [float(r.get(key, math.nan)) for r in trows]
                     trial.set_user_attr(key, sum(vals) / len(vals))
+                # the ATEs' frames: every run's frames with ground truth, summed
+                trial.set_user_attr("ate_frames", sum(int(r.get("ate_frames", 0)) for r in trows))
                 value = math.nan if failed else _objective(trows, metric, map_penalty)
                 if failed or not math.isfinite(value):
                     msg = failed[0].get("error", "") if failed else f"{metric} is not finite"
@@ -383,12 +381,8 @@ def tune(
             "state",
             "value",
             *[r.key for r in space],
-            "experiences",
-            "templates",
-            "links",
-            "ate_m",
-            "dead_reckoning_ate_m",
-            "wall_s",
+            *TRIAL_MEANS,
+            "ate_frames",
             "baseline",
             "error",
         ]
@@ -399,6 +393,11 @@ def tune(
             )
         _plots(study, out_dir, optuna, metric)
     return result
+
+
+TRIAL_MEANS = ("experiences", "templates", "links", "ate_m", "dead_reckoning_ate_m", "wall_s")
+"""What a trial records of its runs (datasets x seeds): their means. Beside them
+``ate_frames``, the frames with ground truth the runs' ATEs are over, summed."""
 
 
 def _inside(r: Range, v: Any) -> bool:
@@ -435,8 +434,9 @@ def _history(study: Any, space: Sequence[Range]) -> list[dict[str, Any]]:
         }
         for r in space:
             row[r.key] = t.params.get(r.key, "")
-        for k in ("experiences", "templates", "links", "ate_m", "dead_reckoning_ate_m", "wall_s"):
+        for k in TRIAL_MEANS:
             row[k] = t.user_attrs.get(k, math.nan)
+        row["ate_frames"] = t.user_attrs.get("ate_frames", 0)
         row["baseline"] = bool(t.user_attrs.get("baseline", False))
         row["error"] = t.user_attrs.get("error", "")
         rows.append(row)

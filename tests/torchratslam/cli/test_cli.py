@@ -88,7 +88,8 @@ def test_compare_backends_on_a_saved_state_and_a_g2o_file(small_run, tmp_path, c
     write_g2o(pg, g2o)
     gt = tmp_path / "gt.txt"
     np.savetxt(gt, pg.poses)
-    assert main([*argv, "--map", str(g2o), "--groundtruth", str(gt), "--backends", "alpha"]) == 0
+    assert main([*argv, "--map", str(g2o), "--groundtruth", str(gt), "--backends", "alpha",
+                 "--overwrite"]) == 0  # fmt: skip
     assert json.loads(js.read_text())[0]["ate_rmse_m"] is not None
 
 

@@ -54,10 +54,11 @@ def test_a_is_moved_onto_b_and_json_goes_to_a_file(small_run, tmp_path, capsys):
     text = capsys.readouterr().out
     assert "LibICP residual" in text and "m^2" in text and "ICP RMSE" in text
     assert "(reference)" in text and "(native)" in text and "start rotations" in text
-    assert main([*argv, "--json", str(js)]) == 0
+    assert main([*argv, "--json", str(js), "--overwrite"]) == 0  # replaces the first
     rep = json.loads(js.read_text())  # no run of its own: judged against no other's
     assert rep["a"]["ate_rmse_m"] is None and "--groundtruth" in rep["a"]["ate_note"]
-    assert main([*argv, "--json", str(js), "--groundtruth", small_run.data]) == 0
+    assert main([*argv, "--json", str(js), "--groundtruth", small_run.data,
+                 "--overwrite"]) == 0  # fmt: skip
     rep = json.loads(js.read_text())
     assert rep["a"]["ate_rmse_m"] is None and "creation times" in rep["a"]["ate_note"]
     assert rep["icp"]["libicp_mse_m2"] < 1e-20  # the same positions

@@ -125,3 +125,85 @@ def test_a_run_refuses_an_out_holding_another_commands_outputs(tmp_path, capsys,
     (out / other).mkdir() if other == "frames" else (out / other).write_text("x")
     argv = ["run", "--config", SMALL, "--data", "sim:loop?frames=10", "--no-progress"]
     _refused([*argv, "--out", str(out)], capsys, out, says=f"({other}); a run does not write")
+
+
+def _py_refused(call, *dirs, says):
+    from torchratslam.errors import InputError
+
+    before = [_snapshot(d) for d in dirs]
+    with pytest.raises(InputError) as info:
+        call()
+    text = str(info.value)
+    assert says in text and "--out" not in text and "--overwrite" not in text, text
+    assert [_snapshot(d) for d in dirs] == before  # nothing written, nothing changed
+    return text
+
+
+def test_the_python_functions_check_their_out_as_the_commands_do(places, tmp_path):
+    from torchratslam.experiments.mbaram_tour import MBARAMTourOptions
+    from torchratslam.experiments.mbaram_tour import run_experiment as mbaram
+    from torchratslam.experiments.multisession_tour import MultisessionOptions
+    from torchratslam.experiments.multisession_tour import run_experiment as multisession
+    from torchratslam.sweeps import sweep, tune
+
+    run, foreign = places
+    grid = {"base": SMALL, "datasets": ["sim:loop?frames=20"],
+            "parameters": {"vt_match_threshold": [0.03]}}  # fmt: skip
+    calls = {
+        "sweep": lambda out: sweep(grid, out),
+        "tune": lambda out: tune("sim:loop?frames=20", config=SMALL, trials=1, out=out),
+        "mbaram": lambda out: mbaram("sim:loop?frames=30", out, MBARAMTourOptions(plots=False)),
+        "multisession": lambda out: multisession(
+            SMALL, "sim:loop", out, MultisessionOptions(figures=False)
+        ),
+    }
+    for name, call in calls.items():
+        for out in (foreign, run.out):
+            text = _py_refused(lambda c=call, o=out: c(o), out, says="is not empty and holds no")
+            assert f"out={str(out)!r}" in text, (name, text)
+    # a finished run of their own is replaced only with overwrite=True
+    mb = tmp_path / "mb"
+    options = MBARAMTourOptions(laps=1, loc_laps=1, plots=False)
+    mbaram("sim:loop?frames=30", mb, options)
+    text = _py_refused(lambda: mbaram("sim:loop?frames=30", mb, options), mb, says="finished")
+    assert "overwrite=True" in text
+    mbaram("sim:loop?frames=30", mb, options, overwrite=True)
+    ms = tmp_path / "ms"
+    (ms).mkdir()
+    (ms / "report.json").write_text("{}")
+    text = _py_refused(lambda: calls["multisession"](ms), ms, says="finished multisession run")
+    assert "overwrite=True" in text
+
+
+def test_an_existing_output_file_is_replaced_only_with_overwrite(places, tmp_path, capsys):
+    from torchratslam.experiments.compare_maps import compare_maps, write_json
+
+    run, _ = places
+    a = str(run.out)
+    mine = tmp_path / "mine"
+    mine.mkdir()
+    for flag in ("--json", "--figure"):
+        target = mine / f"notes{flag[2:]}"
+        target.write_bytes(b"my notes")
+        argv = ["compare-maps", a, a, flag, str(target)]
+        _refused(argv, capsys, mine, says="exists; choose another path, or replace it with "
+                 "--overwrite")  # fmt: skip
+        assert target.read_bytes() == b"my notes"
+        assert main([*argv, "--overwrite"]) == 0
+        assert target.read_bytes() != b"my notes"
+    notes = mine / "cmp.json"
+    notes.write_text("mine")
+    argv = ["compare-backends", "--map", str(run.out / "state"), "--backends", "alpha"]
+    _refused([*argv, "--json", str(notes)], capsys, mine, says="--overwrite")
+    assert main([*argv, "--json", str(notes), "--overwrite"]) == 0
+    assert notes.read_text().startswith("[")
+    # from Python: the same checks, in Python's words
+    fig = mine / "fig.png"
+    fig.write_text("mine")
+    text = _py_refused(lambda: compare_maps(a, a, figure=fig), mine, says="exists")
+    assert "overwrite=True" in text
+    report = compare_maps(a, a)
+    text = _py_refused(lambda: write_json(report, notes), mine, says="exists")
+    _py_refused(lambda: write_json(report, run.out / "metrics.json"), run.out, says="input")
+    write_json(report, notes, overwrite=True)
+    assert notes.read_text().startswith("{")

@@ -86,3 +86,19 @@ def test_ranges():
             parse_range("k", bad)
     with pytest.raises(ConfigError, match="vt_match_threshold"):
         tune(DATA, {"vt_match_thresold": "0.1:0.2"}, trials=1, progress=False)
+
+
+def test_a_trials_ate_says_the_frames_it_is_over(tmp_path):
+    from torchratslam.sweeps import sweep
+
+    tune(DATA, SPACE, config="virtual_tour", fixed=FIXED, trials=2, seeds=[0, 1], workers=1,
+         progress=False, out=tmp_path)  # fmt: skip
+    hist = _history(tmp_path / "history.csv")
+    # the same runs as a sweep: each says the frames its ATE is over; a trial sums its runs'
+    first = float(hist[0]["vt_match_threshold"])
+    grid = {"base": "virtual_tour", "set": FIXED, "datasets": [DATA], "seeds": [0, 1],
+            "parameters": {"vt_match_threshold": [first]}}  # fmt: skip
+    rows = sweep(grid, workers=1, figures=False)
+    rows = rows.to_dict("records") if hasattr(rows, "to_dict") else rows
+    assert len(rows) == 2 and all(r["ate_frames"] >= 3 for r in rows)
+    assert [int(h["ate_frames"]) for h in hist] == [sum(r["ate_frames"] for r in rows)] * 2

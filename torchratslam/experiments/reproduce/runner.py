@@ -30,7 +30,7 @@ log = logging.getLogger(__name__)
 
 
 def _prepare(out: Path, *, overwrite: bool) -> None:
-    from torchratslam.experiments.out_checks import check_out_dir
+    from ratslam_graph.out_checks import check_out_dir
 
     # new, empty, or a report of its own: a folder holding anything else is refused
     check_out_dir(out, what="report", marks=("report.json", "index.json"))

@@ -1,8 +1,9 @@
-"""Where a command may write, checked before any work: an OUT directory must be new,
-empty, or hold an earlier run of the same command (:func:`check_out_dir`); a single
-output file (``--json``, ``--figure``) must not be one of the command's inputs, lie inside
-one, or be a file another command wrote (recorded in its folder's manifest;
-:func:`check_out_file`). Nothing is written when a check fails.
+"""Where a command may write, checked before any work, from the command line and from
+Python alike: an OUT directory must be new, empty, or hold an earlier run of the same
+command (:func:`check_out_dir`); a single output file (``--json``, ``--figure``) must not
+be one of the command's inputs, lie inside one, or be a file another command wrote
+(recorded in its folder's manifest), and an existing file is replaced only when asked
+(:func:`check_out_file`). Nothing is written when a check fails.
 """
 
 from __future__ import annotations
@@ -11,7 +12,7 @@ from collections.abc import Iterable
 from pathlib import Path
 
 from ratslam_graph.atomic import LOCK_NAME, MANIFEST_NAME, Manifest
-from torchratslam.errors import InputError, option
+from ratslam_graph.errors import InputError, option
 
 __all__ = ["check_out_dir", "check_out_file"]
 
@@ -47,10 +48,15 @@ def check_out_dir(
 
 
 def check_out_file(
-    target: str | Path | None, *, inputs: Iterable[str | Path], flag: tuple[str, str]
+    target: str | Path | None,
+    *,
+    inputs: Iterable[str | Path],
+    flag: tuple[str, str],
+    overwrite: bool = False,
 ) -> None:
     """Refuse an output file that is an input, lies inside one, or is a file another
-    command wrote (its folder's manifest lists it: a run's ``metrics.json``, ``map.png``).
+    command wrote (its folder's manifest lists it: a run's ``metrics.json``, ``map.png``);
+    any other existing file is replaced only with ``overwrite``.
 
     Raises:
         InputError: naming the option and the file.
@@ -73,4 +79,9 @@ def check_out_file(
         raise InputError(
             f"{name} is a file another torchratslam command wrote in {t.parent} (it is in "
             "that folder's manifest); choose another path"
+        )
+    if t.exists() and not overwrite:
+        raise InputError(
+            f"{name} exists; choose another path, or replace it with "
+            f"{option('--overwrite', 'overwrite=True')}"
         )
