@@ -41,6 +41,16 @@ def _with_room(a: np.ndarray, n: int) -> np.ndarray:
     return out
 
 
+def _exp(x: float) -> float:
+    """``exp(x)`` as C's: ``inf`` past the largest double, where Python raises (a
+    template seen on every frame for long enough decays past it; OpenRatSLAM's energy
+    is then -inf and nothing is injected)."""
+    try:
+        return math.exp(x)
+    except OverflowError:
+        return math.inf
+
+
 class PoseCells:
     """The RatSLAM pose-cell module (OpenRatSLAM's ``PosecellNetwork`` behaviour).
 
@@ -187,7 +197,7 @@ class PoseCells:
         ):  # OpenRatSLAM's unsigned "size - 10" wraps while fewer than 10 exist
             if vt == self.current_vt:
                 self._t_decay[vt] += p.vt_active_decay
-            energy = p.pc_vt_inject_energy / 30.0 * (30.0 - math.exp(1.2 * self._t_decay[vt]))
+            energy = p.pc_vt_inject_energy / 30.0 * (30.0 - _exp(1.2 * self._t_decay[vt]))
             if energy > 0:
                 n_th = self.dims[2]
                 self.vt_delta_pc_th = rad / (2.0 * math.pi) * n_th

@@ -689,3 +689,27 @@ def test_place_packet_and_set_centre(method):
     assert net.best.dtype == F64
     with pytest.raises(InputError, match="centre"):
         net.set_centre([1.0, 2.0])
+
+
+def test_a_template_seen_for_ever_stops_injecting_without_overflowing():
+    # the decay of a template seen again and again grows by vt_active_decay each time;
+    # past exp's range C's exp gives inf, OpenRatSLAM's energy -inf: nothing is injected
+    p = _params(pc_dim_xy=11, vt_active_decay=10.0, pc_vt_restore=0.0)
+    pc = PoseCells(p, dtype=F64)
+    for t in range(12):  # 12 templates: template 0 is no longer among the last 10
+        pc.on_view_template(ViewMatch(t, is_new=True))
+        pc.on_odometry(0.0, 0.0, 1.0)
+    seen = 0
+    while 1.2 * pc.template_decay[0] <= 800.0:  # past exp's largest argument, 709.78
+        before = pc.activity.clone()
+        pc.on_view_template(ViewMatch(0))
+        seen += 1
+        energy = (
+            p.pc_vt_inject_energy / 30.0 * (30.0 - np.exp(min(1.2 * pc.template_decay[0], 700.0)))
+        )
+        if energy <= 0:
+            assert torch.equal(pc.activity, before)  # no injection once the energy is <= 0
+    assert seen > 60 and 1.2 * pc.template_decay[0] > 709.79
+    before = pc.activity.clone()
+    pc.on_view_template(ViewMatch(0))  # overflows in Python's math.exp, not here
+    assert torch.equal(pc.activity, before)
