@@ -104,6 +104,7 @@ def log_match(
     counts: torch.Tensor,
     prior: torch.Tensor,
     device: torch.device,
+    memo: dict[str, tuple[torch.Tensor, torch.Tensor, torch.Tensor]] | None = None,
 ) -> tuple[torch.Tensor, torch.Tensor]:
     """``log M_j`` (Eqs. 1-6 in log space) and the vigilance pass mask (Eqs. 7-8) of
     every node.
@@ -117,6 +118,11 @@ def log_match(
         counts: ``N_j`` of every node. Shape: (N,).
         prior: ``P(w_j)`` of every node. Shape: (N,).
         device: the device of the node statistics.
+        memo: channel -> (input, log posterior, pass mask) of the last input seen on an
+            unchanged map: a channel whose input equals the stored one reuses its terms
+            (the same numbers, computed once), e.g. the laser channels of one frame
+            localised with and without odometry. The caller clears it when the map
+            changes; None computes every channel.
 
     Returns:
         ``log M_j`` and the pass mask, both of shape (N,).
@@ -130,43 +136,64 @@ def log_match(
         raise ConfigError(f"MBARAM channels {list(names)} all have weight 0; use others")
     log_terms = []
     passed = torch.ones(n, dtype=torch.bool, device=device)
-    log_smax = {k: math.log(params.s_max) for k in names}
-    if "odometry" in log_smax:
-        log_smax["odometry"] = math.log(params.s_max_odometry)
     for k in names:
-        ch = channels[k]
-        d = ch.diff(x[k], n)  # (n, D)
-        if ch.full:
-            q = ch.maha(d, n)
+        hit = memo.get(k) if memo is not None else None
+        if hit is not None and torch.equal(hit[0], x[k]):
+            logpost, ok = hit[1], hit[2]
         else:
-            r = d.square_().div_(ch.cov[:n])  # (x - mu)^2 / sigma^2 per dimension
-            q = r.sum(-1)
-        eps = params.laser_outlier
-        if eps > 0 and k != "odometry" and not ch.full:
-            # per beam log((1 - eps) N(x; mu, s2) + eps / R): a beam blocked by a
-            # pedestrian or a moved box costs at most -log(eps / R), not (x - mu)^2 / s2
-            log_u = math.log(eps / (params.laser_max_range * params.laser_scale))
-            logn = (r + ch.logcov[:n] + _LOG_2PI).mul_(-0.5).add_(math.log1p(-eps))
-            logp = torch.logaddexp(logn, torch.full_like(logn, log_u)).sum(-1)
-        else:
-            logp = -0.5 * (ch.dim * _LOG_2PI + ch.logdet[:n] + q)  # Eq. 5
-        joint = logp + logprior
-        logpost = joint - torch.logsumexp(joint, 0)  # Eqs. 1, 4
+            s_max = params.s_max_odometry if k == "odometry" else params.s_max
+            logpost, ok = _channel_terms(channels[k], x[k], k, params, a, b, logprior, s_max)
+            if memo is not None:
+                memo[k] = (x[k].clone(), logpost, ok)
         if weights[k] > 0:
             log_terms.append(math.log(weights[k] / wsum) + logpost)
-        if params.vigilance == "current":
-            logs = ch.logdet[:n]
-        elif ch.full:
-            # det(a Sigma + b d'd'^T), d' = a d: matrix determinant lemma (Eq. 10)
-            logs = ch.dim * a.log() + ch.logdet[:n] + torch.log1p(a * b * q)
-        else:
-            # Eq. 10 per dimension: a s2 + b (a d)^2 = a s2 (1 + a b d^2 / s2), floored
-            # as learning floors it; log S' = sum of the logs (Eq. 8)
-            logv = r.mul_((a * b)[:, None]).log1p_().add_(ch.logcov[:n]).add_(a.log()[:, None])
-            logs = logv.clamp_min_(ch.log_floor).sum(-1)
-        passed &= logs <= log_smax[k]  # Eq. 7
+        passed &= ok
     log_m = torch.logsumexp(torch.stack(log_terms), 0)  # Eq. 3 in log space
     return log_m, passed
+
+
+def _channel_terms(
+    ch: ChannelNodes,
+    x: torch.Tensor,
+    k: str,
+    params: MBARAMParams,
+    a: torch.Tensor,
+    b: torch.Tensor,
+    logprior: torch.Tensor,
+    s_max: float,
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """One channel's log posterior ``log P(w_j | x_k)`` (Eqs. 1, 4, 5) and its vigilance
+    pass mask (Eqs. 7-8, 10) over the N nodes of :func:`log_match`. Shape: (N,) each."""
+    n = len(a)
+    d = ch.diff(x, n)  # (n, D)
+    if ch.full:
+        q = ch.maha(d, n)
+    else:
+        r = d.square_().div_(ch.cov[:n])  # (x - mu)^2 / sigma^2 per dimension
+    eps = params.laser_outlier
+    if eps > 0 and k != "odometry" and not ch.full:
+        # per beam log((1 - eps) N(x; mu, s2) + eps / R): a beam blocked by a
+        # pedestrian or a moved box costs at most -log(eps / R), not (x - mu)^2 / s2
+        log_u = math.log(eps / (params.laser_max_range * params.laser_scale))
+        logn = (r + ch.logcov[:n] + _LOG_2PI).mul_(-0.5).add_(math.log1p(-eps))
+        logp = torch.logaddexp(logn, torch.full_like(logn, log_u)).sum(-1)
+    else:
+        if not ch.full:
+            q = r.sum(-1)
+        logp = -0.5 * (ch.dim * _LOG_2PI + ch.logdet[:n] + q)  # Eq. 5
+    joint = logp + logprior
+    logpost = joint - torch.logsumexp(joint, 0)  # Eqs. 1, 4
+    if params.vigilance == "current":
+        logs = ch.logdet[:n]
+    elif ch.full:
+        # det(a Sigma + b d'd'^T), d' = a d: matrix determinant lemma (Eq. 10)
+        logs = ch.dim * a.log() + ch.logdet[:n] + torch.log1p(a * b * q)
+    else:
+        # Eq. 10 per dimension: a s2 + b (a d)^2 = a s2 (1 + a b d^2 / s2), floored
+        # as learning floors it; log S' = sum of the logs (Eq. 8)
+        logv = r.mul_((a * b)[:, None]).log1p_().add_(ch.logcov[:n]).add_(a.log()[:, None])
+        logs = logv.clamp_min_(ch.log_floor).sum(-1)
+    return logpost, logs <= math.log(s_max)  # Eq. 7
 
 
 def select(log_m: torch.Tensor, passed: torch.Tensor) -> MatchResult:

@@ -129,6 +129,8 @@ class MBARAM:
         self.prev_winner = -1
         self._track: dict[tuple[str, ...], torch.Tensor] = {}
         self._transition: torch.Tensor | None = None
+        # per channel, the terms of the last localised input on this map (log_match's memo)
+        self._memo: dict[str, tuple[torch.Tensor, torch.Tensor, torch.Tensor]] = {}
 
     def __len__(self) -> int:
         return self._n
@@ -212,9 +214,10 @@ class MBARAM:
 
     # ------------------------------------------------------------- the model
     def _evaluate(
-        self, x: dict[str, torch.Tensor], names: Sequence[str]
+        self, x: dict[str, torch.Tensor], names: Sequence[str], *, memo: bool = False
     ) -> tuple[torch.Tensor, torch.Tensor]:
-        """``log M_j`` (N,) and the vigilance pass mask (N,) of every node."""
+        """``log M_j`` (N,) and the vigilance pass mask (N,) of every node (``memo``: a
+        channel whose input equals the last localised one reuses its terms)."""
         n = self._n
         return log_match(
             self._ch,
@@ -225,12 +228,15 @@ class MBARAM:
             self.counts[:n],
             self.prior[:n],
             self.device,
+            self._memo if memo else None,
         )
 
-    def _select(self, x: dict[str, torch.Tensor], names: Sequence[str]) -> MatchResult:
+    def _select(
+        self, x: dict[str, torch.Tensor], names: Sequence[str], *, memo: bool = False
+    ) -> MatchResult:
         if self._n == 0:
             return MatchResult(-1)
-        return select(*self._evaluate(x, names))
+        return select(*self._evaluate(x, names, memo=memo))
 
     def scores(
         self, inputs: Mapping[str, Any], channels: Iterable[str] | None = None
@@ -283,8 +289,8 @@ class MBARAM:
         x = self._check(inputs, names)
         p = self.params
         if p.loc_track_hops == 0 or self._n == 0:
-            return self._select(x, names)
-        log_m, passed = self._evaluate(x, names)
+            return self._select(x, names, memo=True)
+        log_m, passed = self._evaluate(x, names, memo=True)
         if self._transition is None:
             self._transition = transition_matrix(
                 torch.as_tensor(list(self.graph.edges), dtype=torch.long).reshape(-1, 2),
@@ -315,6 +321,7 @@ class MBARAM:
         x = self._check(inputs, self.names)
         self._track.clear()
         self._transition = None
+        self._memo.clear()
         if not self._ch:
             for k, v in x.items():
                 self._ch[k] = self._new_channel(k, v.numel())

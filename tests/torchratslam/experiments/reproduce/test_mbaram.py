@@ -14,6 +14,7 @@ from torchratslam.experiments.reproduce.mbaram import (
     _OUTDOOR,
     PAPER_INDOOR,
     PAPER_OUTDOOR,
+    QUICK_CORRIDOR_FRAMES,
     RAWSEEDS_HZ,
     set_frames,
     set_spec,
@@ -32,8 +33,12 @@ def test_corridor_quick_published_beside_recommended(tmp_path):
     r = rows(report)
     runs = report.details["runs"]
     pub, rec = runs["published"], runs["recommended"]
+    # the stand-in is the paper's single 40 x 5 m corridor, three laps in the quick version
+    assert report.details["tour"] == "lab_corridor"
+    assert report.details["frames"] == 3 * QUICK_CORRIDOR_FRAMES + 1
+    assert rec["frames"] + rec["localisation_frames"] == report.details["frames"]
     # Table 3 as printed: the odometry channel's det(Sigma) <= 1 with the robot on a
-    # straight line bounds nothing, so a handful of nodes cover the whole loop
+    # straight line bounds nothing, so a handful of nodes cover the whole corridor
     assert pub["nodes"] <= 8
     assert rec["nodes"] > 2 * pub["nodes"]
     # the map converges: the second traverse adds fewer nodes than the first
