@@ -114,27 +114,6 @@ def find_link(out_ends: np.ndarray, out_next: np.ndarray, dst: np.ndarray, a: in
 
 
 @njit(cache=True, nogil=True)
-def build_out(src: np.ndarray, n: int, e: int) -> tuple[np.ndarray, np.ndarray]:
-    # pragma: no cover - compiled
-    """The out-link lists of ``e`` links from their sources (creation order).
-
-    Shape:
-        src: (>=e,). Returns (max(n, 1), 2) first/last link of each experience (-1: none)
-        and (max(e, 1),) next link of the same source (-1: the last).
-    """
-    out_ends = np.full((max(n, 1), 2), -1, np.int64)
-    out_next = np.full(max(e, 1), -1, np.int64)
-    for k in range(e):
-        s = src[k]
-        if out_ends[s, 0] < 0:
-            out_ends[s, 0] = k
-        else:
-            out_next[out_ends[s, 1]] = k
-        out_ends[s, 1] = k
-    return out_ends, out_next
-
-
-@njit(cache=True, nogil=True)
 def count_transition(
     counts: np.ndarray,
     behaviour: np.ndarray,
@@ -177,8 +156,13 @@ def frame_step(
     edge_dirty: np.ndarray,
     out_ends: np.ndarray,
     out_next: np.ndarray,
-    ref: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray],
-    odo: tuple[float, float, float],
+    order: np.ndarray,
+    rsrc: np.ndarray,
+    rdst: np.ndarray,
+    rlink: np.ndarray,
+    vtrans: float,
+    vrot: float,
+    dt: float,
     kind: int,
     dest: int,
     rel: float,
@@ -196,9 +180,9 @@ def frame_step(
         fs: ``[accum_x, accum_y, accum_facing, accum_time, relative_rad]``.
         ist: ``[current_id, prev_id]``.
         pose .. out_next: the map's arrays, with room for one more experience and link.
-        ref: the links in OpenRatSLAM's order (order, sources, targets, values), current,
-            ``ref_n`` rows in use, with room for one more.
-        odo: ``(vtrans, vrot, dt)``; flags bit 1: apply it.
+        order, rsrc, rdst, rlink: the links in OpenRatSLAM's order (creation rows,
+            sources, targets, values), current, ``ref_n`` rows in use, room for one more.
+        vtrans, vrot, dt: the odometry; flags bit 1: apply it.
         kind, dest, rel, beh: the action, its target, relative angle and behaviour.
         n, e: experiences and links in use.
         flags: bit 1 odometry, 2 relax, 4 the map was at a fixed point before this frame,
@@ -210,7 +194,6 @@ def frame_step(
         :data:`RELAXED`, :data:`FIXED`.
     """
     if flags & 1:
-        vtrans, vrot, dt = odo
         step = vtrans * dt
         fs[2] = wrap_pi(fs[2] + vrot * dt)
         fs[0] += step * math.cos(fs[2])
@@ -288,7 +271,6 @@ def frame_step(
         else:
             out_next[out_ends[src_id, 1]] = k
         out_ends[src_id, 1] = k
-        order, rsrc, rdst, rlink = ref
         insert_link(order, rsrc, rdst, rlink, ref_n, k, src_id, new_dst, link[k])
         ref_n += 1
         out |= LINK_ADDED
@@ -307,7 +289,6 @@ def frame_step(
         return out
     if flags & 4 and out == 0:
         return out
-    order, rsrc, rdst, rlink = ref
     ran = sweep(pose, rsrc[:ref_n], rdst[:ref_n], rlink[:ref_n], loops, correction)
     out |= RELAXED
     if ran < loops:

@@ -296,9 +296,9 @@ class ExperienceMap:
         :meth:`apply` and, if ``relax``, :meth:`iterate`; one compiled call when the
         settings allow it (:mod:`ratslam_graph.frame_step`), the same map bit for bit.
         """
-        from ratslam_graph import frame_step
+        from ratslam_graph.frame_step import run_frame
 
-        if frame_step.compiled_frame(self) and frame_step.step_frame(
+        run_frame(
             self,
             odometry,
             action,
@@ -308,13 +308,7 @@ class ExperienceMap:
             template_id=template_id,
             behaviour=behaviour,
             relax=relax,
-        ):
-            return
-        if odometry is not None:
-            self.on_odometry(*odometry)
-        self.apply(action, frame=frame, t=t, pc=pc, template_id=template_id, behaviour=behaviour)
-        if relax:
-            self.iterate()
+        )
 
     def apply(
         self,

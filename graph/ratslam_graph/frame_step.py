@@ -22,7 +22,7 @@ from ratslam_graph.messages import Action, ActionKind
 if TYPE_CHECKING:
     from ratslam_graph.experience_map import ExperienceMap
 
-__all__ = ["compiled_frame", "step_frame"]
+__all__ = ["compiled_frame", "run_frame", "step_frame"]
 
 
 def compiled_frame(em: ExperienceMap) -> bool:
@@ -50,6 +50,31 @@ def compiled_frame(em: ExperienceMap) -> bool:
     )
     em._compiled_for = ((id(p), id(em._backend)), ok)
     return ok
+
+
+def run_frame(
+    em: ExperienceMap,
+    odo: tuple[float, float, float] | None,
+    action: Action,
+    *,
+    frame: int,
+    t: float,
+    pc: Any,
+    template_id: int,
+    behaviour: int,
+    relax: bool,
+) -> None:
+    """:meth:`ExperienceMap.step_frame`: the compiled call when :func:`compiled_frame`
+    allows it and the action is one it takes, else ``on_odometry``, ``apply`` and
+    ``iterate``."""
+    kw = {"frame": frame, "t": t, "pc": pc, "template_id": template_id, "behaviour": behaviour}
+    if compiled_frame(em) and step_frame(em, odo, action, relax=relax, **kw):
+        return
+    if odo is not None:
+        em.on_odometry(*odo)
+    em.apply(action, **kw)
+    if relax:
+        em.iterate()
 
 
 def _checked(em: ExperienceMap, action: Action, pc: Any) -> tuple[float, ...] | None:
@@ -89,11 +114,15 @@ def step_frame(
     s, p, backend = em.store, em.params, em.backend
     n, e = s.n, s.e
     kind = int(action.kind)
+    fixed = em._fixed_at == (s.version, id(p), id(backend))
+    if not kind and (not relax or fixed or n < 2 or e == 0 or p.exp_loops == 0):
+        if odo is not None:  # odometry alone: the Python path costs less than a call
+            em.on_odometry(*odo)
+        return True
     if kind:
         s.reserve(1, 1)
     ref = s._reference()
     ref.reserve()
-    fixed = em._fixed_at == (s.version, id(p), id(backend))
     flags = (
         (odo is not None)
         | relax << 1
@@ -114,8 +143,8 @@ def step_frame(
         s.edge_dirty,
         s.out_ends,
         s.out_next,
-        ref.buffers,
-        (0.0, 0.0, 0.0) if odo is None else odo,
+        *ref.buffers,
+        *((0.0, 0.0, 0.0) if odo is None else odo),
         kind,
         int(action.dest_id),
         float(action.relative_rad),
