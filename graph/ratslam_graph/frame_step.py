@@ -25,6 +25,18 @@ if TYPE_CHECKING:
 __all__ = ["compiled_frame", "run_frame", "step_frame"]
 
 
+_KERNEL: Any = None
+
+
+def _kernel() -> Any:
+    """The compiled module (numba), imported on first use and kept."""
+    global _KERNEL
+    from ratslam_graph import _frame_step
+
+    _KERNEL = _frame_step
+    return _KERNEL
+
+
 def compiled_frame(em: ExperienceMap) -> bool:
     """True if ``em``'s settings are those the compiled frame reproduces."""
     p = em.params
@@ -109,8 +121,7 @@ def step_frame(
     pcv = _checked(em, action, pc)
     if pcv is None:
         return False
-    from ratslam_graph import _frame_step as k
-
+    k = _KERNEL or _kernel()
     s, p, backend = em.store, em.params, em.backend
     n, e = s.n, s.e
     kind = int(action.kind)
