@@ -36,14 +36,38 @@ from ratslam_graph.queries import MapView
 __all__ = ["ExperienceGraph"]
 
 
-def _grow(a: np.ndarray, need: int) -> np.ndarray:
-    """Return ``a`` with at least ``need`` rows (doubling), keeping its content."""
+def _grow(a: np.ndarray, need: int, fill: int = 0) -> np.ndarray:
+    """Return ``a`` with at least ``need`` rows (doubling), keeping its content; new
+    rows hold ``fill``."""
     if need <= len(a):
         return a
     cap = max(need, 2 * len(a), 16)
-    out = np.zeros((cap, *a.shape[1:]), dtype=a.dtype)
+    out = np.full((cap, *a.shape[1:]), fill, dtype=a.dtype)
     out[: len(a)] = a
     return out
+
+
+def out_lists(src: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Each experience's out-links as a list threaded through the link rows, in creation
+    order: the first and last link leaving each experience (-1: none) and each link's
+    next link of the same source (-1: the last). Built with numpy, no loop.
+
+    Shape:
+        src: (E,). Returns (N, 2) and (E,), int64.
+    """
+    e = len(src)
+    out_ends = np.full((n, 2), -1, dtype=np.int64)
+    out_next = np.full(e, -1, dtype=np.int64)
+    if e:
+        o = np.argsort(src, kind="stable")
+        ss = src[o]
+        same = ss[1:] == ss[:-1]
+        out_next[o[:-1][same]] = o[1:][same]
+        first = np.concatenate([[True], ~same])
+        last = np.concatenate([~same, [True]])
+        out_ends[ss[first], 0] = o[first]
+        out_ends[ss[last], 1] = o[last]
+    return out_ends, out_next
 
 
 def _measurement_of(d: float, heading: float, facing: float) -> tuple[float, float, float]:
@@ -100,10 +124,12 @@ class ExperienceGraph:
         src, dst: link ends; link: ``[d, heading, facing, dt]``; meas: ``[dx, dy, dth]``
             in the source's frame; counts: ``(traversals, successes, trials)``;
             behaviour: the movement behaviour label.
+        out_ends, out_next: each experience's out-links (:func:`out_lists`).
+        edge_dirty: 1 where a link's graph attributes are stale.
         version: bumped by every change of poses or links.
     """
 
-    LINK_FIELDS = ("src", "dst", "link", "meas", "counts", "behaviour")
+    LINK_FIELDS = ("src", "dst", "link", "meas", "counts", "behaviour", "edge_dirty", "out_next")
 
     def __init__(self) -> None:
         self.clear()
@@ -123,12 +149,12 @@ class ExperienceGraph:
         self.meas = np.zeros((0, 3))  # dx, dy, dth in the source's frame
         self.counts = np.zeros((0, 3), dtype=np.int64)  # traversals, successes, trials
         self.behaviour = np.zeros(0, dtype=np.int64)
+        self.edge_dirty = np.zeros(0, dtype=np.uint8)
+        self.out_next = np.zeros(0, dtype=np.int64)
+        self.out_ends = np.zeros((0, 2), dtype=np.int64)
         self.version = 0
-        self._eidx: dict[tuple[int, int], int] = {}
-        self._out: dict[int, list[int]] = {}  # each source's link targets, in creation order
         self._g = nx.DiGraph()
         self._g_edges: list[tuple[int, int]] = []  # links not yet in the graph, in order
-        self._dirty_edges: set[int] = set()  # links whose graph attributes are stale
         self._dirty_nodes: set[int] = set()  # experiences whose graph attributes are stale
         self._poses_dirty = False
         self._links_version = 0  # bumped by every change of the links
@@ -169,7 +195,7 @@ class ExperienceGraph:
             for i in sorted(self._dirty_nodes):
                 nodes[i].update(_node_attrs(self.pose, self.pc, self.vt, self.frame, self.t, i))
             self._dirty_nodes.clear()
-        if self._dirty_edges:
+        if self.edge_dirty[: self.e].any():
             self._flush_edges()
         if self._poses_dirty:
             p = self.pose[: self.n].tolist()
@@ -191,10 +217,11 @@ class ExperienceGraph:
 
     def _flush_edges(self) -> None:
         self._sync_structure()
-        for k in sorted(self._dirty_edges):
+        dirty = self.edge_dirty[: self.e]
+        for k in np.flatnonzero(dirty).tolist():
             attrs = _edge_attrs(self.link, self.counts, self.behaviour, k)
             self._g.edges[int(self.src[k]), int(self.dst[k])].update(attrs)
-        self._dirty_edges.clear()
+        dirty[:] = 0
 
     def check_id(self, i: int, what: str) -> int:
         """``i`` as an existing experience id (``what`` names it in the error)."""
@@ -240,13 +267,7 @@ class ExperienceGraph:
                 f"{np.asarray(pcv)}"
             )
         i = self.n
-        if i == len(self.pose):
-            need = i + 1
-            self.pose = _grow(self.pose, need)
-            self.pc = _grow(self.pc, need)
-            self.vt = _grow(self.vt, need)
-            self.frame = _grow(self.frame, need)
-            self.t = _grow(self.t, need)
+        self.reserve(1, 0)
         self.pose[i] = pose
         self.pc[i] = pcv
         self.vt[i] = int(template_id)
@@ -257,20 +278,48 @@ class ExperienceGraph:
         self._dirty_nodes.add(i)  # the graph gets the node and its attributes when read
         return i
 
+    def reserve(self, nodes: int, links: int) -> None:
+        """Make room for ``nodes`` more experiences and ``links`` more links."""
+        need = self.n + nodes
+        if need > len(self.pose):
+            for name in ("pose", "pc", "vt", "frame", "t"):
+                setattr(self, name, _grow(getattr(self, name), need))
+        if need > len(self.out_ends):
+            self.out_ends = _grow(self.out_ends, need, fill=-1)
+        need = self.e + links
+        if need > len(self.src):
+            for name in self.LINK_FIELDS:
+                setattr(self, name, _grow(getattr(self, name), need))
+
     def set_link(self, k: int, d: float, heading: float, facing: float, dt: float) -> None:
         """Write link ``k``'s ``(d, heading, facing, dt)`` and its measurement."""
         self.link[k] = (d, heading, facing, dt)
         self.meas[k] = _measurement_of(d, heading, facing)
-        self._dirty_edges.add(k)
+        self.edge_dirty[k] = 1
         self.version += 1
         self._links_version += 1
 
+    def out_links(self, a: int) -> list[int]:
+        """Rows of the links leaving ``a``, in creation order (a node's few links)."""
+        rows: list[int] = []
+        k = int(self.out_ends[a, 0]) if 0 <= a < self.n else -1
+        nxt = self.out_next
+        while k >= 0:
+            rows.append(k)
+            k = int(nxt[k])
+        return rows
+
+    def _find(self, a: int, b: int) -> int:
+        """Row of the link ``a -> b`` (that direction), or -1."""
+        for k in self.out_links(a):
+            if self.dst[k] == b:
+                return k
+        return -1
+
     def link_index(self, a: int, b: int) -> int:
         """Row of the link between ``a`` and ``b`` in either direction, or -1."""
-        k = self._eidx.get((int(a), int(b)))
-        if k is None:
-            k = self._eidx.get((int(b), int(a)), -1)
-        return k
+        k = self._find(int(a), int(b))
+        return k if k >= 0 else self._find(int(b), int(a))
 
     def add_link(
         self,
@@ -301,17 +350,14 @@ class ExperienceGraph:
         dst = self.check_id(dst, "link target")
         if src == dst:
             raise GraphError(f"cannot link experience {src} to itself")
-        eidx = self._eidx
-        if (src, dst) in eidx or (dst, src) in eidx:
+        if self.link_index(src, dst) >= 0:
             return False
         vals = (float(d), float(heading), float(facing), float(dt))
         if not all(map(math.isfinite, vals)) or vals[0] < 0:
             raise InputError(f"link needs finite d >= 0, heading, facing and dt, got {list(vals)}")
         k = self.e
         before = self._links_version
-        if k == len(self.src):
-            for name in self.LINK_FIELDS:
-                setattr(self, name, _grow(getattr(self, name), k + 1))
+        self.reserve(0, 1)
         self.src[k] = src
         self.dst[k] = dst
         self.set_link(
@@ -324,8 +370,12 @@ class ExperienceGraph:
         self.counts[k] = counts
         self.behaviour[k] = int(behaviour)
         self.e = k + 1
-        eidx[(src, dst)] = k
-        self._out.setdefault(src, []).append(dst)
+        ends, self.out_next[k] = self.out_ends, -1
+        if ends[src, 0] < 0:
+            ends[src, 0] = k
+        else:
+            self.out_next[ends[src, 1]] = k
+        ends[src, 1] = k
         self._g_edges.append((src, dst))  # the graph gets it when read
         # keep the cached reference order current when it was current before the link
         cached = self._ref
@@ -338,8 +388,8 @@ class ExperienceGraph:
 
     def remove_link(self, src: int, dst: int) -> None:
         """Delete the link ``src -> dst`` (exact direction); later links shift down one row."""
-        k = self._eidx.get((int(src), int(dst)))
-        if k is None:
+        k = self._find(int(src), int(dst)) if 0 <= int(src) < self.n else -1
+        if k < 0:
             raise GraphError(f"there is no link {src} -> {dst} to remove")
         self._flush_edges()  # rows shift below (and the graph holds every link)
         e = self.e
@@ -348,11 +398,11 @@ class ExperienceGraph:
             a[k : e - 1] = a[k + 1 : e]
         self.e = e - 1
         self._g.remove_edge(int(src), int(dst))
-        self._out[int(src)].remove(int(dst))
         self.version += 1
         self._links_version += 1
-        s, d = self.src[: self.e].tolist(), self.dst[: self.e].tolist()
-        self._eidx = {(a, b): i for i, (a, b) in enumerate(zip(s, d))}
+        ends, nxt = out_lists(self.src[: self.e], self.n)
+        self.out_ends[: self.n] = ends
+        self.out_next[: self.e] = nxt
         self._ref = None
 
     def count_transition(self, src: int, dst: int, behaviour: int, threshold: float) -> None:
@@ -365,17 +415,16 @@ class ExperienceGraph:
         """
         k_pair = self.link_index(src, dst)
         # the links leaving src (a node's few out-links, not the map's links)
-        eidx, beh, dsts, counts = self._eidx, self.behaviour, self.dst, self.counts
-        out = [eidx[(src, v)] for v in self._out.get(src, ())]
-        rows = [k for k in out if beh[k] == behaviour]
+        beh, dsts, counts = self.behaviour, self.dst, self.counts
+        rows = [k for k in self.out_links(src) if beh[k] == behaviour]
         for k in rows:
             counts[k, 2] += 1
             if dsts[k] == dst:
                 counts[k, 1] += 1
         if k_pair >= 0:
             counts[k_pair, 0] += 1
-            self._dirty_edges.add(k_pair)
-        self._dirty_edges.update(rows)
+            self.edge_dirty[k_pair] = 1
+        self.edge_dirty[rows] = 1
         if threshold > 0.0 and rows:
             sel = np.array(rows, dtype=np.int64)
             conf = link_confidence(self.counts[sel, 1], self.counts[sel, 2])
@@ -473,7 +522,8 @@ class ExperienceGraph:
         eidx: dict[tuple[int, int], int],
     ) -> None:
         """Replace everything with checked state arrays (``poses, pc, template_id, frame,
-        t, link_ends, link_values, link_counts, link_behaviour``) and their link index."""
+        t, link_ends, link_values, link_counts, link_behaviour``); ``eidx``, their link
+        index, is the caller's check of one link per pair (the out-lists are rebuilt)."""
         self.clear()
         ends, vals = arrays["link_ends"], arrays["link_values"]
         n, e = len(arrays["poses"]), len(ends)
@@ -485,9 +535,8 @@ class ExperienceGraph:
         # the same scalar formula as at link creation, so measurements round-trip bit for bit
         self.meas = np.array([_measurement_of(*v) for v in vals[:, :3].tolist()]).reshape(e, 3)
         self.counts, self.behaviour = arrays["link_counts"], arrays["link_behaviour"]
-        self._eidx = eidx
-        for a, b in sorted(eidx, key=eidx.__getitem__):
-            self._out.setdefault(a, []).append(b)
+        self.edge_dirty = np.zeros(e, dtype=np.uint8)
+        self.out_ends, self.out_next = out_lists(self.src, n)
         nodes = (self.pose, self.pc, self.vt, self.frame, self.t)
         self._g.add_nodes_from((i, _node_attrs(*nodes, i)) for i in range(n))
         s, d = ends[:, 0].tolist(), ends[:, 1].tolist()

@@ -86,6 +86,20 @@ def _log_not_converged(loops: int, backend: str, n: int) -> None:
         )
 
 
+class _Slot:
+    """An attribute kept in a float64 (``_fs``) or int64 (``_ist``) array of the map,
+    which the compiled frame updates in place; read as a Python float or int."""
+
+    def __init__(self, array: str, index: int) -> None:
+        self.array, self.index, self.cast = array, index, float if array == "_fs" else int
+
+    def __get__(self, obj: Any, owner: Any = None) -> Any:
+        return self if obj is None else self.cast(getattr(obj, self.array)[self.index])
+
+    def __set__(self, obj: Any, value: float) -> None:
+        getattr(obj, self.array)[self.index] = value
+
+
 def _read_state(state: dict[str, Any]) -> dict[str, Any]:
     """Check a :meth:`ExperienceMap.get_state` dictionary; its arrays and scalars, typed.
 
@@ -158,6 +172,14 @@ class ExperienceMap:
         relative_rad: relative view angle given with the last set-current.
     """
 
+    current_id = _Slot("_ist", 0)
+    prev_id = _Slot("_ist", 1)
+    accum_x = _Slot("_fs", 0)
+    accum_y = _Slot("_fs", 1)
+    accum_facing = _Slot("_fs", 2)
+    accum_time = _Slot("_fs", 3)
+    relative_rad = _Slot("_fs", 4)
+
     relax_tol = 1e-12
     """Relative early-stop tolerance for backends that take ``tol`` (the alpha rule):
     a relaxation whose first pass moves no coordinate by more than ``relax_tol`` times
@@ -173,12 +195,15 @@ class ExperienceMap:
         self.params = params if params is not None else ExperienceMapParams()
         self._backend = backend
         self.store = ExperienceGraph()
+        self._compiled_for: tuple[tuple[int, int], bool] | None = None
         self._clear()
 
     def _clear(self) -> None:
         self.store.clear()
         self._relax_cursor = 0  # exp_relax_budget: the link the next relaxation starts at
         self._fixed_at: tuple | None = None  # (version, params, backend) of a fixed point
+        self._fs = np.zeros(5)  # accum_x, accum_y, accum_facing, accum_time, relative_rad
+        self._ist = np.zeros(2, dtype=np.int64)  # current_id, prev_id
         self.current_id = -1
         self.prev_id = -1
         self.accum_x = 0.0
@@ -255,6 +280,36 @@ class ExperienceMap:
         return _link_of(self.accum_x, self.accum_y, self.accum_facing + relative_rad, th)
 
     # --------------------------------------------------------------- actions
+    def step_frame(
+        self,
+        odometry: tuple[float, float, float] | None,
+        action: Action,
+        *,
+        frame: int = -1,
+        t: float = 0.0,
+        pc: tuple[float, float, float] | np.ndarray = (0.0, 0.0, 0.0),
+        template_id: int = -1,
+        behaviour: int = 0,
+        relax: bool = True,
+    ) -> None:
+        """A whole frame: :meth:`on_odometry` (unless ``odometry`` is None),
+        :meth:`apply` and, if ``relax``, :meth:`iterate`; one compiled call when the
+        settings allow it (:mod:`ratslam_graph.frame_step`), the same map bit for bit.
+        """
+        from ratslam_graph.frame_step import run_frame
+
+        run_frame(
+            self,
+            odometry,
+            action,
+            frame=frame,
+            t=t,
+            pc=pc,
+            template_id=template_id,
+            behaviour=behaviour,
+            relax=relax,
+        )
+
     def apply(
         self,
         action: Action,
@@ -496,7 +551,7 @@ class ExperienceMap:
             )
             bounded = bool(budget) and loops * e > budget
             if not (fixed or bounded):
-                _log_not_converged(loops, self.params.exp_backend, s.n)
+                self._not_converged()
         elif callable(relax_inplace):  # alpha_local: relaxed only where the map changed
             fixed = relaxation.relax_local(
                 backend,
@@ -523,6 +578,9 @@ class ExperienceMap:
         s.poses_changed()
         if fixed:
             self._fixed_at = (s.version, id(self.params), id(backend))
+
+    def _not_converged(self) -> None:
+        _log_not_converged(self.params.exp_loops, self.params.exp_backend, self.store.n)
 
     # ---------------------------------------------------------------- state
     def get_state(self) -> dict[str, Any]:

@@ -135,6 +135,15 @@ class ReferenceOrder:
         Shape:
             link: (>=3,).
         """
+        self.reserve()
+        from ratslam_graph.backends._sweep import insert_link
+
+        order, srcs, dsts, values = self._bufs
+        insert_link(order, srcs, dsts, values, self.n, k, src, dst, link)
+        self.n += 1
+
+    def reserve(self) -> None:
+        """Make room for one more link in the buffers (doubling)."""
         n = self.n
         if n == len(self._bufs[0]):
             cap = max(16, 2 * n)
@@ -144,11 +153,13 @@ class ReferenceOrder:
                 b[:n] = a[:n]
                 grown.append(b)
             self._bufs = grown
-        from ratslam_graph.backends._sweep import insert_link
 
+    @property
+    def buffers(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """The buffers (order, sources, targets, values), ``n`` rows in use, for the
+        compiled frame (:mod:`ratslam_graph.frame_step`), which inserts in place."""
         order, srcs, dsts, values = self._bufs
-        insert_link(order, srcs, dsts, values, n, k, src, dst, link)
-        self.n = n + 1
+        return order, srcs, dsts, values
 
 
 def sweep_in_place(

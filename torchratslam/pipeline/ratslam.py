@@ -232,6 +232,21 @@ class RatSLAM:
         params = getattr(em, "params", None)
         relax = getattr(params, "exp_relax", "every_frame")
         extra = {} if behaviour is None else {"behaviour": int(behaviour)}
+        step = getattr(em, "step_frame", None)
+        rule = getattr(params, "exp_create_rule", "pc_distance")
+        if step is not None and rule != "activity":  # one call: odometry, action, relaxation
+            with self.timings.section("experience_map"):
+                step(
+                    None if self._skips_odometry(index) else odo,
+                    action,
+                    frame=index,
+                    t=float(frame.t),
+                    pc=pc,
+                    template_id=int(view.template_id),
+                    relax=relax == "every_frame" or action.kind != ActionKind.NONE,
+                    **extra,
+                )
+            return int(em.current_id)
         with self.timings.section("experience_map"):
             if not self._skips_odometry(index):
                 em.on_odometry(*odo)
