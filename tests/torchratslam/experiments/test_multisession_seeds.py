@@ -259,7 +259,7 @@ def test_cli_merge_anchor_reaches_the_experiment(tmp_path, monkeypatch):
 
     seen: list = []
 
-    def fake_run(config, tour, out, options):
+    def fake_run(config, tour, out, options, overwrite=False):
         seen.append(options)
         return {"report": {}}
 
