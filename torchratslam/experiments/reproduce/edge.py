@@ -71,6 +71,7 @@ class _Setup:
     start: str
     goal: str
     reexplore_s: float
+    adapt_explore_s: float
 
 
 FULL = _Setup(
@@ -83,6 +84,7 @@ FULL = _Setup(
     start="B",
     goal="D",
     reexplore_s=300.0,
+    adapt_explore_s=1200.0,  # "about twenty minutes exploring the unmodified environment"
 )
 QUICK = _Setup(
     plan=SMALL_FLOOR,
@@ -94,6 +96,7 @@ QUICK = _Setup(
     start="A",
     goal="C",
     reexplore_s=60.0,
+    adapt_explore_s=150.0,
 )
 
 
@@ -412,7 +415,7 @@ def _adapt(
     _, dims = s.matrices[0]
     robot = MappingRobot(_config(dims, keys), office=office, seed=ctx.seed)
     agent = NavigationAgent(robot, NavParams(junction_turns=True))
-    robot.explore(s.explore_s)
+    robot.explore(s.adapt_explore_s)
     while True:
         try:
             agent.mark_goal(s.start)  # the robot has been at both places
