@@ -2,12 +2,14 @@
 
 A goal is marked during exploration: the experience current when the robot passed
 nearest the goal's place. A trial then repeats, every frame: find the route from the
-current experience (afresh when the experience changes, else every ``replan_s``), keep
+current experience (afresh when the experience changes, else every ``replan_s``; the
+route being followed is kept unless the fresh one is faster by ``route_keep_s``), keep
 the last good one through route loss (:func:`~ratslam_graph.navigation.recovery.track_route`)
 and explore once it times out, choose the behaviour whose local path is closest to the
 route, drive, and map the frame with the behaviour it executed. The trial ends when the
 robot believes it is at the goal (its map position within ``arrive_m`` of the goal
-experience) or at the time limit; it succeeded when the ground truth is then within
+experience, and its current experience the goal's place: the goal experience or one
+with its view template) or at the time limit; it succeeded when the ground truth is then within
 ``reach_m`` of the goal.
 
 Example:

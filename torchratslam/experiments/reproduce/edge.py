@@ -552,10 +552,11 @@ def _adaptation(ctx: ExperimentContext) -> Report:
         "bypassed by turning; arbitration compares the local paths with the route's shape "
         "from the robot on (each turn closed up), as the map can hold a junction's "
         "representations metres apart.",
-        "Before every trial the robot is steered back to the start the shortest way round the "
-        "obstacle (ground truth, as by an operator; mapped, not counted). After the removal it "
-        "is steered along the open path both ways, then explores; the paper's robot explored "
-        "for 20 and 6 minutes.",
+        f"The robot explores the unmodified floor for {s.adapt_explore_s / 60:g} minutes before "
+        "the obstacle is placed (the paper's robot: about twenty). Before every trial it is "
+        "steered back to the start the shortest way round the obstacle (ground truth, as by "
+        "an operator; mapped, not counted). After the removal it is steered along the open "
+        f"path both ways, then explores for {s.reexplore_s / 60:g} minutes (the paper's: six).",
     )
     return Report(
         experiment="edge/adaptation",
