@@ -2,12 +2,14 @@
 
 A goal is marked during exploration: the experience current when the robot passed
 nearest the goal's place. A trial then repeats, every frame: find the route from the
-current experience (afresh when the experience changes, else every ``replan_s``), keep
+current experience (afresh when the experience changes, else every ``replan_s``; the
+route being followed is kept unless the fresh one is faster by ``route_keep_s``), keep
 the last good one through route loss (:func:`~ratslam_graph.navigation.recovery.track_route`)
 and explore once it times out, choose the behaviour whose local path is closest to the
 route, drive, and map the frame with the behaviour it executed. The trial ends when the
 robot believes it is at the goal (its map position within ``arrive_m`` of the goal
-experience) or at the time limit; it succeeded when the ground truth is then within
+experience, and its current experience the goal's place: the goal experience or one
+with its view template) or at the time limit; it succeeded when the ground truth is then within
 ``reach_m`` of the goal.
 
 Example:
@@ -27,6 +29,7 @@ import numpy as np
 
 from ratslam_graph.errors import InputError
 from ratslam_graph.experience_map import ExperienceMap
+from ratslam_graph.features import Route
 from ratslam_graph.geometry import wrap_angle
 from ratslam_graph.navigation.recovery import (
     RecoveryMode,
@@ -36,7 +39,13 @@ from ratslam_graph.navigation.recovery import (
 )
 from ratslam_graph.navigation.route import joined_positions
 from torchratslam.navigation.params import NavParams
-from torchratslam.navigation.planner import arbitrate, local_options, map_pose, plan_route
+from torchratslam.navigation.planner import (
+    Plan,
+    arbitrate,
+    local_options,
+    map_pose,
+    plan_route,
+)
 from torchratslam.navigation.robot import MappingRobot
 from torchratslam.sim.office.builder import Office
 from torchratslam.sim.office.motion import Behaviour
@@ -137,10 +146,82 @@ class NavigationAgent:
             raise InputError(f"the robot has not been within {self.params.reach_m} m of {name}")
         return Goal(name, (float(xy[0]), float(xy[1])), int(r.exp_ids[k]))
 
+    def goal_place(self, goal: Goal) -> np.ndarray:
+        """The experiences that stand for the goal's place (``arrive_at_place``): the goal
+        experience, those learnt with its view template and those within
+        ``arrive_links`` links of it (either way); sorted ids."""
+        store = self.em.store
+        n, e = store.n, store.e
+        place = np.zeros(n, dtype=bool)
+        place[goal.exp] = True
+        if store.vt[goal.exp] >= 0:  # -1: learnt without a template
+            place |= store.vt[:n] == store.vt[goal.exp]
+        src, dst = store.src[:e], store.dst[:e]
+        near = np.zeros(n, dtype=bool)
+        near[goal.exp] = True
+        for _ in range(self.params.arrive_links):  # a few hops, each over all links at once
+            step = near.copy()
+            step[dst[near[src]]] = True
+            step[src[near[dst]]] = True
+            near = step
+        return np.flatnonzero(place | near)
+
     def _arrived(self, goal: Goal) -> bool:
-        em = self.em
+        """The robot believes it is at the goal: its map position within ``arrive_m`` of
+        the goal experience's and (``arrive_at_place``) its current experience one of
+        :meth:`goal_place`."""
+        em, p = self.em, self.params
         here = map_pose(em)[:2]
-        return bool(np.hypot(*(em.poses[goal.exp, :2] - here)) <= self.params.arrive_m)
+        if np.hypot(*(em.poses[goal.exp, :2] - here)) > p.arrive_m:
+            return False
+        if not p.arrive_at_place:
+            return True
+        cur = em.current_id
+        if cur == goal.exp:
+            return True
+        return bool(cur >= 0 and np.isin(cur, self.goal_place(goal)))
+
+    def keep_route(self, old: Route, plan: Plan) -> Route:
+        """Route hysteresis (``route_keep_s``): the route to follow, ``old`` (rejoined)
+        or ``plan``'s fresh one.
+
+        The part of ``old`` still intact (each step a link the way it was driven, or,
+        with ``junction_turns``, a turn onto a crossing way within ``overlap_m``) is
+        rejoined at its node the robot reaches soonest (``plan``'s temporal map, whose
+        way there is taken) and followed on by its own times. The fresh route
+        wins when it is faster by ``route_keep_s`` or more, or when nothing of ``old``
+        is intact and reachable.
+        """
+        new = plan.route
+        assert new is not None
+        store, tm = self.em.store, plan.tmap
+        n, e = store.n, store.e
+        ids = np.asarray(old.ids, np.int64)
+        ts = np.asarray(old.times, np.float64)
+        if len(ids) == 0 or ids.max() >= n:
+            return new
+        keys = store.src[:e].astype(np.int64) * (n + 1) + store.dst[:e]
+        a, b = ids[:-1], ids[1:]
+        ok = (a == b) | np.isin(a * (n + 1) + b, keys)
+        if self.params.junction_turns:  # a turn onto a crossing way (planner.turn_pairs)
+            gap = np.hypot(*(store.pose[a, :2] - store.pose[b, :2]).T)
+            rot = np.abs(wrap_angle(store.pose[a, 2] - store.pose[b, 2]))
+            ok |= (gap <= self.params.overlap_m) & (rot > np.pi / 4) & (rot < 3 * np.pi / 4)
+        first = int(np.flatnonzero(~ok)[-1]) + 1 if (~ok).any() else 0
+        reach = tm.times[ids[first:]]
+        if not np.isfinite(reach).any():
+            return new
+        j = first + int(np.argmin(reach))  # the intact node nearest the robot (in time)
+        if new.total_time <= float(reach[j - first] + ts[-1] - ts[j]) - self.params.route_keep_s:
+            return new
+        head = [int(ids[j])]  # the temporal map's way from the robot's place to ids[j]
+        while tm.parent[head[-1]] >= 0 and tm.parent[head[-1]] < n and len(head) <= n:
+            head.append(int(tm.parent[head[-1]]))
+        head.reverse()
+        t_head = [float(tm.times[i]) for i in head]
+        t_head = [t - t_head[0] for t in t_head]
+        tail = (ts[j + 1 :] - ts[j] + t_head[-1]).tolist()
+        return Route(ids=head + ids[j + 1 :].tolist(), times=t_head + tail)
 
     def _count_blocked(self, pose: np.ndarray, behaviour: int) -> None:
         """A blocked transition counts against the links of the place's other
@@ -185,7 +266,15 @@ class NavigationAgent:
             if r.exp_id != last_exp or now - last_plan >= p.replan_s:
                 plan = plan_route(self.em, goal.exp, turns=p.junction_turns)
                 ms.append(plan.ms)
-                state = track_route(state, plan.route, now, rec)
+                route = plan.route
+                if (
+                    route is not None
+                    and p.route_keep_s > 0
+                    and state.mode is RecoveryMode.FOLLOWING
+                    and state.route is not None
+                ):
+                    route = self.keep_route(state.route, plan)
+                state = track_route(state, route, now, rec)
                 last_exp, last_plan = r.exp_id, now
                 if first is None and plan.route is not None:
                     first = tuple(plan.route.ids)

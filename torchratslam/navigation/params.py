@@ -30,7 +30,23 @@ class NavParams:
         replan_s: the route is found afresh at least this often (and whenever the
             current experience changes).
         arrive_m: the robot believes it has arrived when its map position is this close
-            to the goal experience's.
+            to the goal experience's (and, with ``arrive_at_place``, its current
+            experience stands for the goal's place).
+        arrive_at_place: the robot has arrived only when its current (peak) experience
+            is the goal experience or one recognised as its place: learnt with the same
+            view template, or within ``arrive_links`` links of it (either way). Near a
+            corner the map can hold metres of floor in less than ``arrive_m``, and map
+            distance alone stops the robot short; the paper's robot is at the goal when
+            its peak experience is the goal's. False: map distance alone.
+        arrive_links: see ``arrive_at_place`` (0: the goal experience and those sharing
+            its view template only).
+        route_keep_s: route hysteresis: a route found afresh replaces the one being
+            followed only when it is at least this much faster (s) than rejoining the
+            old one (by the fastest way in the new temporal map) and following it on
+            from there; a route whose remaining links are gone is replaced at once.
+            Two routes of about equal time otherwise take turns as the current
+            experience changes, and the robot turns back and forth between them.
+            0: always the fresh route (the paper's constant replanning).
         reach_m: a trial succeeds when the ground truth is this close to the goal (m).
         recovery_timeout_s: route-loss recovery relies on the last route this long.
         time_factor: a trial's time limit is this times the shortest path's driving time,
@@ -53,6 +69,9 @@ class NavParams:
     blocked_cooldown_s: float = 8.0
     replan_s: float = 1.0
     arrive_m: float = 0.8
+    arrive_at_place: bool = True
+    arrive_links: int = 0
+    route_keep_s: float = 5.0
     reach_m: float = 1.5
     recovery_timeout_s: float = 10.0
     time_factor: float = 4.0
@@ -72,6 +91,10 @@ class NavParams:
         ):
             if not getattr(self, name) > 0:
                 raise ConfigError(f"NavParams.{name}={getattr(self, name)} must be > 0")
+        if not self.route_keep_s >= 0:
+            raise ConfigError(f"NavParams.route_keep_s={self.route_keep_s} must be >= 0")
+        if self.arrive_links < 0:
+            raise ConfigError(f"NavParams.arrive_links={self.arrive_links} must be >= 0")
 
 
 def office_config(
