@@ -231,13 +231,14 @@ def _goal_recall(ctx: ExperimentContext) -> Report:
         return f"{sum(t['reached'] for t in ts)}/{len(ts)}"
 
     paper = [t for t in trials if t["map"] == "paper"]
-    ratios = [t["path_m"] / max(t["shortest_m"], 1e-9) for t in paper if t["reached"]]
+    # a trial that starts at its goal (shortest path 0) has no path / shortest
+    ratios = [t["path_m"] / t["shortest_m"] for t in paper if t["reached"] and t["shortest_m"] > 0]
 
     def em_ratio(m: str) -> float | None:
         rs = [
-            t["path_m"] / max(t["shortest_m"], 1e-9)
+            t["path_m"] / t["shortest_m"]
             for t in paper
-            if t["matrix"] == m and t["reached"]
+            if t["matrix"] == m and t["reached"] and t["shortest_m"] > 0
         ]
         return round(float(np.median(rs)), 2) if rs else None
 

@@ -69,8 +69,9 @@ def goal_memory_explore(
 
 
 def summary(results: list[Trial]) -> dict[str, Any]:
-    """Goals reached, the median path / shortest over those reached, and each trial."""
-    ratios = [t.path_m / max(t.shortest_m, 1e-9) for t in results if t.reached]
+    """Goals reached, the median path / shortest over those reached, and each trial (a
+    trial that starts at its goal, shortest path 0, has no ratio)."""
+    ratios = [t.path_m / t.shortest_m for t in results if t.reached and t.shortest_m > 0]
     return {
         "reached": sum(t.reached for t in results),
         "goals": len(results),

@@ -25,3 +25,20 @@ def test_goal_memory_quick_runs_both_systems_on_the_same_goals(tmp_path):
     )
     for f in d["figures"]:
         assert (tmp_path / f).stat().st_size > 0
+
+
+def test_a_trial_starting_at_its_goal_has_no_path_ratio():
+    import numpy as np
+
+    from torchratslam.experiments.reproduce.edge_goal_memory import summary
+    from torchratslam.navigation.agent import Goal, Trial
+
+    def trial(name, reached, path, shortest):
+        empty = np.zeros((0, 2))
+        return Trial(Goal(name, (0.0, 0.0), 0), reached, path, shortest, 1.0, (), empty, empty)
+
+    got = summary([trial("A", True, 0.0, 0.0), trial("B", True, 30.0, 20.0),
+                   trial("C", False, 9.0, 3.0), trial("D", True, 20.0, 10.0)])  # fmt: skip
+    assert got["reached"] == 3 and got["goals"] == 4
+    assert got["median_path_ratio"] == np.median([30.0 / 20.0, 20.0 / 10.0])  # not 0/0
+    assert summary([trial("A", True, 0.0, 0.0)])["median_path_ratio"] is None
