@@ -269,14 +269,31 @@ class ExperienceGraph:
         i = self.n
         self.reserve(1, 0)
         self.pose[i] = pose
-        self.pc[i] = pcv
+        self.node_added(pcv, template_id, frame, t)
+        return i
+
+    def node_added(self, pc: tuple[float, ...], template_id: int, frame: int, t: float) -> None:
+        """Record experience ``n`` (its pose already written): its attributes, the count,
+        and the graph's pending node (it gets the node and its attributes when read)."""
+        i = self.n
+        self.pc[i] = pc
         self.vt[i] = int(template_id)
         self.frame[i] = int(frame)
         self.t[i] = float(t)
         self.n = i + 1
         self.version += 1
-        self._dirty_nodes.add(i)  # the graph gets the node and its attributes when read
-        return i
+        self._dirty_nodes.add(i)
+
+    def link_added(self, ref: relaxation.ReferenceOrder) -> None:
+        """Record link ``e``, written with its out-list entry and reference-order place by
+        the compiled frame (``ref``, the order it updated): the count, the graph's pending
+        edge, the cached order."""
+        e = self.e
+        self.e = e + 1
+        self.version += 1
+        self._links_version += 1
+        self._ref = (self._links_version, ref)
+        self._g_edges.append((int(self.src[e]), int(self.dst[e])))
 
     def reserve(self, nodes: int, links: int) -> None:
         """Make room for ``nodes`` more experiences and ``links`` more links."""

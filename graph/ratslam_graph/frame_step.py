@@ -173,20 +173,10 @@ def step_frame(
             em.iterate()
         return True
     if out & k.NODE_ADDED:
-        s.pc[n] = pcv
-        s.vt[n] = int(template_id)
-        s.frame[n] = int(frame)
-        s.t[n] = float(t)
-        s.n = n + 1
-        s.version += 1
-        s._dirty_nodes.add(n)
+        s.node_added(pcv, template_id, frame, t)
     if out & k.LINK_ADDED:
-        s.e = e + 1
-        s.version += 1
-        s._links_version += 1
         ref.n += 1
-        s._ref = (s._links_version, ref)
-        s._g_edges.append((int(s.src[e]), int(s.dst[e])))
+        s.link_added(ref)
     if out & k.RELAXED:
         s.poses_changed()
         if out & k.FIXED:
