@@ -1,11 +1,12 @@
 """The experiences and links of an experience map: growable arrays mirrored by networkx.
 
 :class:`ExperienceGraph` holds node poses, pose-cell coordinates, link endpoints and
-measurements in preallocated numpy arrays (grown by doubling) kept in sync with a
-:class:`networkx.DiGraph`, so building the pose graph and relaxing never loops over links
-or nodes in Python; the graph's attributes are refreshed lazily when
-:attr:`ExperienceGraph.graph` is read. :class:`ratslam_graph.experience_map.ExperienceMap`
-drives it (odometry, pose-cell actions, relaxation).
+measurements in preallocated numpy arrays (grown by doubling) mirrored by a
+:class:`networkx.DiGraph` (:class:`~ratslam_graph.graph_mirror.GraphMirror`, brought up
+to date when :attr:`ExperienceGraph.graph` is read), so building the pose graph and
+relaxing never loops over links or nodes in Python.
+:class:`ratslam_graph.experience_map.ExperienceMap` drives it (odometry, pose-cell actions,
+relaxation).
 
 Example:
     >>> from ratslam_graph.experience_graph import ExperienceGraph
@@ -30,6 +31,7 @@ from ratslam_graph import relaxation
 from ratslam_graph.errors import GraphError, InputError
 from ratslam_graph.features import link_confidence
 from ratslam_graph.geometry import wrap_angle
+from ratslam_graph.graph_mirror import GraphMirror
 from ratslam_graph.posegraph import PoseGraph
 from ratslam_graph.queries import MapView
 
@@ -73,39 +75,6 @@ def out_lists(src: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
 def _measurement_of(d: float, heading: float, facing: float) -> tuple[float, float, float]:
     """A RatSLAM link ``(d, heading, facing)`` as a Pose2 between ``[dx, dy, dth]``."""
     return d * math.cos(heading), d * math.sin(heading), facing
-
-
-def _node_attrs(
-    pose: np.ndarray, pc: np.ndarray, vt: np.ndarray, frame: np.ndarray, t: np.ndarray, i: int
-) -> dict[str, Any]:
-    """The graph attributes of experience ``i``."""
-    x, y, th = pose[i].tolist()
-    return {
-        "x": x,
-        "y": y,
-        "th": th,
-        "pc": tuple(pc[i].tolist()),
-        "template_id": int(vt[i]),
-        "frame": int(frame[i]),
-        "t": float(t[i]),
-    }
-
-
-def _edge_attrs(link: np.ndarray, counts: np.ndarray, behaviour: np.ndarray, k: int) -> dict:
-    """The graph attributes of link ``k``."""
-    d, heading, facing, dt = link[k].tolist()
-    trav, succ, trials = counts[k].tolist()
-    return {
-        "d": d,
-        "heading": heading,
-        "facing": facing,
-        "dt": dt,
-        "traversals": trav,
-        "successes": succ,
-        "trials": trials,
-        "behaviour": int(behaviour[k]),
-        "confidence": float(link_confidence(succ, trials)),
-    }
 
 
 class ExperienceGraph:
@@ -153,10 +122,7 @@ class ExperienceGraph:
         self.out_next = np.zeros(0, dtype=np.int64)
         self.out_ends = np.zeros((0, 2), dtype=np.int64)
         self.version = 0
-        self._g = nx.DiGraph()
-        self._g_edges: list[tuple[int, int]] = []  # links not yet in the graph, in order
-        self._dirty_nodes: set[int] = set()  # experiences whose graph attributes are stale
-        self._poses_dirty = False
+        self._mirror = GraphMirror()  # the networkx view, updated when read
         self._links_version = 0  # bumped by every change of the links
         # (links version, the links in OpenRatSLAM's order)
         self._ref: tuple[int, relaxation.ReferenceOrder] | None = None
@@ -177,7 +143,7 @@ class ExperienceGraph:
 
     def poses_changed(self) -> None:
         """Say that :attr:`pose` was written in place (the graph's poses are stale)."""
-        self._poses_dirty = True
+        self._mirror.poses_dirty = True
         self.version += 1
 
     @property
@@ -189,39 +155,7 @@ class ExperienceGraph:
         behaviour, confidence``. Treat it as read-only: change the map through the
         methods so the arrays stay in sync.
         """
-        self._sync_structure()
-        if self._dirty_nodes:
-            nodes = self._g.nodes
-            for i in sorted(self._dirty_nodes):
-                nodes[i].update(_node_attrs(self.pose, self.pc, self.vt, self.frame, self.t, i))
-            self._dirty_nodes.clear()
-        if self.edge_dirty[: self.e].any():
-            self._flush_edges()
-        if self._poses_dirty:
-            p = self.pose[: self.n].tolist()
-            nx.set_node_attributes(
-                self._g, {i: {"x": x, "y": y, "th": th} for i, (x, y, th) in enumerate(p)}
-            )
-            self._poses_dirty = False
-        return self._g
-
-    def _sync_structure(self) -> None:
-        """Add the experiences and links made since the graph was last read (their
-        attributes follow from the dirty sets)."""
-        g = self._g
-        if len(g) < self.n:
-            g.add_nodes_from(range(len(g), self.n))
-        if self._g_edges:
-            g.add_edges_from(self._g_edges)
-            self._g_edges.clear()
-
-    def _flush_edges(self) -> None:
-        self._sync_structure()
-        dirty = self.edge_dirty[: self.e]
-        for k in np.flatnonzero(dirty).tolist():
-            attrs = _edge_attrs(self.link, self.counts, self.behaviour, k)
-            self._g.edges[int(self.src[k]), int(self.dst[k])].update(attrs)
-        dirty[:] = 0
+        return self._mirror.read(self)
 
     def check_id(self, i: int, what: str) -> int:
         """``i`` as an existing experience id (``what`` names it in the error)."""
@@ -282,7 +216,7 @@ class ExperienceGraph:
         self.t[i] = float(t)
         self.n = i + 1
         self.version += 1
-        self._dirty_nodes.add(i)
+        self._mirror.dirty_nodes.add(i)
 
     def link_added(self, ref: relaxation.ReferenceOrder) -> None:
         """Record link ``e``, written with its out-list entry and reference-order place by
@@ -293,7 +227,7 @@ class ExperienceGraph:
         self.version += 1
         self._links_version += 1
         self._ref = (self._links_version, ref)
-        self._g_edges.append((int(self.src[e]), int(self.dst[e])))
+        self._mirror.pending_edges.append((int(self.src[e]), int(self.dst[e])))
 
     def reserve(self, nodes: int, links: int) -> None:
         """Make room for ``nodes`` more experiences and ``links`` more links."""
@@ -393,7 +327,7 @@ class ExperienceGraph:
         else:
             self.out_next[ends[src, 1]] = k
         ends[src, 1] = k
-        self._g_edges.append((src, dst))  # the graph gets it when read
+        self._mirror.pending_edges.append((src, dst))  # the graph gets it when read
         # keep the cached reference order current when it was current before the link
         cached = self._ref
         if cached is None or cached[0] != before or cached[1].n != k:
@@ -408,13 +342,13 @@ class ExperienceGraph:
         k = self._find(int(src), int(dst)) if 0 <= int(src) < self.n else -1
         if k < 0:
             raise GraphError(f"there is no link {src} -> {dst} to remove")
-        self._flush_edges()  # rows shift below (and the graph holds every link)
+        self._mirror.flush_edges(self)  # rows shift below (and the graph holds every link)
         e = self.e
         for name in self.LINK_FIELDS:
             a = getattr(self, name)
             a[k : e - 1] = a[k + 1 : e]
         self.e = e - 1
-        self._g.remove_edge(int(src), int(dst))
+        self._mirror.remove_edge(src, dst)
         self.version += 1
         self._links_version += 1
         ends, nxt = out_lists(self.src[: self.e], self.n)
@@ -533,14 +467,10 @@ class ExperienceGraph:
             zone_th=float(zone_th),
         )
 
-    def load(
-        self,
-        arrays: dict[str, Any],
-        eidx: dict[tuple[int, int], int],
-    ) -> None:
+    def load(self, arrays: dict[str, Any]) -> None:
         """Replace everything with checked state arrays (``poses, pc, template_id, frame,
-        t, link_ends, link_values, link_counts, link_behaviour``); ``eidx``, their link
-        index, is the caller's check of one link per pair (the out-lists are rebuilt)."""
+        t, link_ends, link_values, link_counts, link_behaviour``; the caller has checked
+        one link per pair); the out-lists and the graph are rebuilt."""
         self.clear()
         ends, vals = arrays["link_ends"], arrays["link_values"]
         n, e = len(arrays["poses"]), len(ends)
@@ -554,9 +484,4 @@ class ExperienceGraph:
         self.counts, self.behaviour = arrays["link_counts"], arrays["link_behaviour"]
         self.edge_dirty = np.zeros(e, dtype=np.uint8)
         self.out_ends, self.out_next = out_lists(self.src, n)
-        nodes = (self.pose, self.pc, self.vt, self.frame, self.t)
-        self._g.add_nodes_from((i, _node_attrs(*nodes, i)) for i in range(n))
-        s, d = ends[:, 0].tolist(), ends[:, 1].tolist()
-        self._g.add_edges_from(
-            (s[k], d[k], _edge_attrs(self.link, self.counts, self.behaviour, k)) for k in range(e)
-        )
+        self._mirror.load(self)

@@ -45,10 +45,11 @@ import networkx as nx
 import numpy as np
 
 from ratslam_graph import queries, relaxation
-from ratslam_graph.errors import GraphError, MapFormatError
+from ratslam_graph.errors import GraphError
 from ratslam_graph.experience_graph import ExperienceGraph
-from ratslam_graph.features import average_transition, peak_experience
+from ratslam_graph.features import average_transition
 from ratslam_graph.geometry import inverse, wrap_angle
+from ratslam_graph.map_state import map_state, read_map_state
 from ratslam_graph.messages import Action, ActionKind
 from ratslam_graph.params import ExperienceMapParams
 from ratslam_graph.posegraph import PoseGraph
@@ -59,12 +60,6 @@ __all__ = ["ExperienceMap"]
 
 log = logging.getLogger(__name__)
 
-STATE_FORMAT = "ratslam_graph.experience_map"
-STATE_VERSION = 1
-
-_INT_SCALARS = ("current_id", "prev_id")
-_FLOAT_SCALARS = ("accum_x", "accum_y", "accum_facing", "accum_time", "relative_rad")
-
 
 def _link_of(x: float, y: float, facing: float, th: float) -> tuple[float, float, float]:
     """An accumulated displacement ``(x, y)`` and facing as a link ``(d, heading, facing)``
@@ -74,16 +69,6 @@ def _link_of(x: float, y: float, facing: float, th: float) -> tuple[float, float
     heading = wrap_angle(math.atan2(y, x) - th, include_pi=True)
     facing = wrap_angle(wrap_angle(facing, include_pi=True) - th, include_pi=True)
     return d, float(heading), float(facing)
-
-
-def _log_not_converged(loops: int, backend: str, n: int) -> None:
-    if log.isEnabledFor(logging.DEBUG):
-        log.debug(
-            "relaxation: %d passes of %r did not reach a fixed point (%d experiences)",
-            loops,
-            backend,
-            n,
-        )
 
 
 class _Slot:
@@ -98,58 +83,6 @@ class _Slot:
 
     def __set__(self, obj: Any, value: float) -> None:
         getattr(obj, self.array)[self.index] = value
-
-
-def _read_state(state: dict[str, Any]) -> dict[str, Any]:
-    """Check a :meth:`ExperienceMap.get_state` dictionary; its arrays and scalars, typed.
-
-    Raises:
-        MapFormatError: see :meth:`ExperienceMap.set_state`.
-    """
-    fmt, version = state.get("format", STATE_FORMAT), state.get("version", STATE_VERSION)
-    if fmt != STATE_FORMAT or version != STATE_VERSION:
-        raise MapFormatError(
-            f"not an experience-map state of version {STATE_VERSION} "
-            f"(format={fmt!r}, version={version!r}); save it again with this version"
-        )
-    out: dict[str, Any]
-    try:
-        poses = np.array(state["poses"], dtype=np.float64).reshape(-1, 3)
-        n = len(poses)
-        ends = np.array(state["link_ends"], dtype=np.int64).reshape(-1, 2)
-        e = len(ends)
-        out = {
-            "poses": poses,
-            "pc": np.array(state["pc"], dtype=np.float64).reshape(n, 3),
-            "template_id": np.array(state["template_id"], dtype=np.int64).reshape(n),
-            "frame": np.array(state["frame"], dtype=np.int64).reshape(n),
-            "t": np.array(state["t"], dtype=np.float64).reshape(n),
-            "link_ends": ends,
-            "link_values": np.array(state["link_values"], dtype=np.float64).reshape(e, 4),
-            "link_counts": np.array(state["link_counts"], dtype=np.int64).reshape(e, 3),
-            "link_behaviour": np.array(state["link_behaviour"], dtype=np.int64).reshape(e),
-        }
-        scalars = {k: state[k] for k in (*_INT_SCALARS, *_FLOAT_SCALARS[:-1])}
-        scalars["relative_rad"] = state.get("relative_rad", 0.0)
-    except (KeyError, ValueError) as exc:
-        raise MapFormatError(f"experience-map state is incomplete or malformed: {exc}") from None
-    if e and (ends.min() < 0 or ends.max() >= n or np.any(ends[:, 0] == ends[:, 1])):
-        raise MapFormatError("experience-map state has links to missing experiences or self-links")
-    try:
-        out.update({k: int(scalars[k]) for k in _INT_SCALARS})
-        out.update({k: float(scalars[k]) for k in _FLOAT_SCALARS})
-    except (TypeError, ValueError) as exc:
-        raise MapFormatError(f"experience-map state has a malformed scalar: {exc}") from None
-    if not all(-1 <= out[k] < n for k in _INT_SCALARS):
-        raise MapFormatError("experience-map state has a current/previous id out of range")
-    s, d = ends[:, 0].tolist(), ends[:, 1].tolist()
-    out["eidx"] = {(a, b): i for i, (a, b) in enumerate(zip(s, d))}
-    if len(out["eidx"]) != e:
-        raise MapFormatError(
-            "experience-map state links a pair of experiences twice; keep one link per pair"
-        )
-    out["relax_cursor"] = int(state.get("relax_cursor", 0))
-    return out
 
 
 class ExperienceMap:
@@ -483,32 +416,16 @@ class ExperienceMap:
         dims: tuple[float, ...] | None = None,
         relative_rad: float = 0.0,
     ) -> Action:
-        """The action of ``exp_create_rule="activity"`` (Eqs. 1-4 of the experience-map paper).
-
-        Every experience's activity comes from its pose-cell distance to the packet and
-        its view (:func:`ratslam_graph.features.experience_activity` with the zone
-        constants ``exp_activity_zone_*``); the most active is the peak experience. A
-        peak below ``exp_activity_threshold`` (or none) learns a new experience
-        (``CREATE``); a peak other than the current experience, and more active than it,
-        becomes current (``LINK``); otherwise nothing happens.
-
-        Args:
-            pc: pose-cell coordinates of the dominant packet (cells).
-            template_id: the current view template.
-            dims: ``(X, Y, TH)`` (or ``(XY, TH)``, a square network): distances the
-                short way round the wrapping network (None: plain differences).
-            relative_rad: the relative view angle the action carries.
-        """
-        a = queries.activity(self.view(), pc, template_id, dims=dims)
-        peak, level = peak_experience(a)
-        cur = self.current_id
-        if peak < 0 or level < self.params.exp_activity_threshold:
-            return Action(
-                ActionKind.CREATE, dest_id=len(self), src_id=cur, relative_rad=relative_rad
-            )
-        if cur >= 0 and a[cur] >= level:
-            return Action.none()
-        return Action(ActionKind.LINK, dest_id=peak, src_id=cur, relative_rad=relative_rad)
+        """The action of ``exp_create_rule="activity"`` (Eqs. 1-4 of the experience-map
+        paper; :func:`ratslam_graph.queries.activity_action` with ``exp_activity_threshold``)."""
+        return queries.activity_action(
+            self.view(),
+            pc,
+            template_id,
+            threshold=self.params.exp_activity_threshold,
+            dims=dims,
+            relative_rad=relative_rad,
+        )
 
     # ------------------------------------------------------------ relaxation
     @property
@@ -528,86 +445,27 @@ class ExperienceMap:
         backend on :meth:`posegraph`) and their early stops are
         :mod:`ratslam_graph.relaxation`'s.
         """
-        loops = self.params.exp_loops
-        alpha = self.params.exp_backend.startswith("alpha")
-        s = self.store
-        if s.n < 2 or s.e == 0 or (loops == 0 and alpha):
+        p, s = self.params, self.store
+        if s.n < 2 or s.e == 0 or (p.exp_loops == 0 and p.exp_backend.startswith("alpha")):
             return
         backend = self.backend
-        if self._fixed_at == (s.version, id(self.params), id(backend)):
+        if self._fixed_at == (s.version, id(p), id(backend)):
             return
-        n, e, correction = s.n, s.e, self.params.exp_correction
-        relax_inplace = getattr(backend, "relax_inplace", None)
-        if alpha and getattr(backend, "schedule", None) == "openratslam":
-            # the map's own arrays: float64, C-contiguous, int64 ends
-            budget = self.params.exp_relax_budget
-            self._relax_cursor, fixed = relaxation.sweep_in_place(
-                s.pose,
-                s.reference_links(),
-                loops=loops,
-                correction=correction,
-                budget=budget,
-                cursor=self._relax_cursor,
-            )
-            bounded = bool(budget) and loops * e > budget
-            if not (fixed or bounded):
-                self._not_converged()
-        elif callable(relax_inplace):  # alpha_local: relaxed only where the map changed
-            fixed = relaxation.relax_local(
-                backend,
-                s.pose[:n],
-                s.src[:e],
-                s.dst[:e],
-                s.link[:e],
-                loops=loops,
-                correction=correction,
-                budget=self.params.exp_relax_budget,
-            )
-        else:
-            fixed = relaxation.relax_with_backend(
-                backend,
-                s.pose[:n],
-                s.posegraph(),
-                loops=loops,
-                correction=correction,
-                relax_tol=self.relax_tol,
-                name=self.params.exp_backend,
-            )
-            if not fixed and alpha:
-                _log_not_converged(loops, self.params.exp_backend, s.n)
-        s.poses_changed()
+        self._relax_cursor, fixed = relaxation.relax_map(
+            s, p, backend, cursor=self._relax_cursor, relax_tol=self.relax_tol
+        )
         if fixed:
-            self._fixed_at = (s.version, id(self.params), id(backend))
+            self._fixed_at = (s.version, id(p), id(backend))
 
     def _not_converged(self) -> None:
-        _log_not_converged(self.params.exp_loops, self.params.exp_backend, self.store.n)
+        p = self.params
+        relaxation.log_not_converged(p.exp_loops, p.exp_backend, self.store.n)
 
     # ---------------------------------------------------------------- state
     def get_state(self) -> dict[str, Any]:
-        """Everything needed to restore the map exactly: numpy arrays and Python scalars."""
-        s = self.store
-        n, e = s.n, s.e
-        return {
-            "format": STATE_FORMAT,
-            "version": STATE_VERSION,
-            "poses": s.pose[:n].copy(),
-            "pc": s.pc[:n].copy(),
-            "template_id": s.vt[:n].copy(),
-            "frame": s.frame[:n].copy(),
-            "t": s.t[:n].copy(),
-            "link_ends": np.stack([s.src[:e], s.dst[:e]], axis=1),
-            "link_values": s.link[:e].copy(),
-            "link_counts": s.counts[:e].copy(),
-            "link_behaviour": s.behaviour[:e].copy(),
-            "current_id": int(self.current_id),
-            "prev_id": int(self.prev_id),
-            "accum_x": float(self.accum_x),
-            "accum_y": float(self.accum_y),
-            "accum_facing": float(self.accum_facing),
-            "accum_time": float(self.accum_time),
-            "relative_rad": float(self.relative_rad),
-            "relax_cursor": int(self._relax_cursor),
-        }
+        """Everything needed to restore the map exactly: numpy arrays and Python scalars
+        (:func:`ratslam_graph.map_state.map_state`)."""
+        return map_state(self.store, self._ist, self._fs, self._relax_cursor)
 
     def set_state(self, state: dict[str, Any]) -> None:
         """Restore a :meth:`get_state` dictionary (replaces the whole map).
@@ -617,13 +475,13 @@ class ExperienceMap:
 
         Raises:
             MapFormatError: a key is missing, an array has the wrong shape, a link points
-                at a missing experience, or the format/version is not this one. The map is
-                left unchanged.
+                at a missing experience, or the format/version is not this one
+                (:func:`ratslam_graph.map_state.read_map_state`). The map is left unchanged.
         """
-        st = _read_state(state)
+        st = read_map_state(state)
         self._clear()
         self._reset_backend()
-        self.store.load(st, st["eidx"])
+        self.store.load(st)
         self.current_id, self.prev_id = st["current_id"], st["prev_id"]
         self.accum_x, self.accum_y = st["accum_x"], st["accum_y"]
         self.accum_facing, self.accum_time = st["accum_facing"], st["accum_time"]

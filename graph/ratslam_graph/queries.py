@@ -27,10 +27,12 @@ import numpy as np
 from ratslam_graph import features
 from ratslam_graph.errors import GraphError, InputError
 from ratslam_graph.features import Route
+from ratslam_graph.messages import Action, ActionKind
 
 __all__ = [
     "MapView",
     "activity",
+    "activity_action",
     "link_components",
     "peak_experience",
     "route",
@@ -124,6 +126,42 @@ def peak_experience(
 ) -> tuple[int, float]:
     """The most active experience and its activity (``(-1, 0.0)`` if none is active)."""
     return features.peak_experience(activity(view, pc, template_id, dims=dims))
+
+
+def activity_action(
+    view: MapView,
+    pc: tuple[float, float, float] | np.ndarray,
+    template_id: int,
+    *,
+    threshold: float,
+    dims: tuple[float, ...] | None = None,
+    relative_rad: float = 0.0,
+) -> Action:
+    """The action of ``exp_create_rule="activity"`` (Eqs. 1-4 of the experience-map paper).
+
+    Every experience's activity comes from its pose-cell distance to the packet and its
+    view (:func:`activity`); the most active is the peak experience. A peak below
+    ``threshold`` (``exp_activity_threshold``; or no peak) learns a new experience
+    (``CREATE``); a peak other than the current experience, and more active than it,
+    becomes current (``LINK``); otherwise nothing happens.
+
+    Args:
+        view: the map.
+        pc: pose-cell coordinates of the dominant packet (cells).
+        template_id: the current view template.
+        threshold: the activity below which a new experience is learnt.
+        dims: ``(X, Y, TH)`` (or ``(XY, TH)``, a square network): distances the short
+            way round the wrapping network (None: plain differences).
+        relative_rad: the relative view angle the action carries.
+    """
+    a = activity(view, pc, template_id, dims=dims)
+    peak, level = features.peak_experience(a)
+    cur, n = view.current_id, len(view.poses)
+    if peak < 0 or level < threshold:
+        return Action(ActionKind.CREATE, dest_id=n, src_id=cur, relative_rad=relative_rad)
+    if cur >= 0 and a[cur] >= level:
+        return Action.none()
+    return Action(ActionKind.LINK, dest_id=peak, src_id=cur, relative_rad=relative_rad)
 
 
 def link_components(view: MapView, frame: str = "local") -> np.ndarray:

@@ -26,7 +26,8 @@ Nothing here loops over links in Python.
 
 from __future__ import annotations
 
-from typing import Any
+import logging
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 
@@ -35,18 +36,44 @@ from ratslam_graph.geometry import wrap_angle
 from ratslam_graph.posegraph import PoseGraph
 from ratslam_graph.protocols import RelaxationBackend
 
+if TYPE_CHECKING:
+    from ratslam_graph.params import ExperienceMapParams
+
 __all__ = [
+    "MapArrays",
     "ReferenceOrder",
+    "log_not_converged",
     "make_map_backend",
     "reference_links",
     "reference_order",
     "relax_local",
+    "relax_map",
     "relax_with_backend",
     "sweep_in_place",
 ]
 
+log = logging.getLogger(__name__)
+
 ReferenceLinks = tuple[np.ndarray, np.ndarray, np.ndarray]
 """Link sources, targets and ``(d, heading, facing)`` in OpenRatSLAM's order."""
+
+
+class MapArrays(Protocol):
+    """What :func:`relax_map` needs of a map's store
+    (:class:`~ratslam_graph.experience_graph.ExperienceGraph`)."""
+
+    n: int
+    e: int
+    pose: np.ndarray
+    src: np.ndarray
+    dst: np.ndarray
+    link: np.ndarray
+
+    def reference_links(self) -> ReferenceLinks: ...
+
+    def posegraph(self, order: str = ...) -> PoseGraph: ...
+
+    def poses_changed(self) -> None: ...
 
 
 def make_map_backend(name: str, relax_order: str) -> RelaxationBackend:
@@ -267,3 +294,78 @@ def relax_with_backend(
     pose[:, :2] = new[:, :2]
     pose[:, 2] = wrap_angle(new[:, 2], include_pi=True)
     return bool(getattr(backend, "last_converged", False))
+
+
+def log_not_converged(loops: int, backend: str, n: int) -> None:
+    """Say (at DEBUG) that a relaxation's passes did not reach a fixed point."""
+    if log.isEnabledFor(logging.DEBUG):
+        log.debug(
+            "relaxation: %d passes of %r did not reach a fixed point (%d experiences)",
+            loops,
+            backend,
+            n,
+        )
+
+
+def relax_map(
+    s: MapArrays,
+    params: ExperienceMapParams,
+    backend: RelaxationBackend,
+    *,
+    cursor: int,
+    relax_tol: float,
+) -> tuple[int, bool]:
+    """Relax a map's arrays in place by the path its settings pick (this module's
+    docstring), ``exp_loops`` passes; the poses are written back and marked changed.
+
+    Args:
+        s: the experiences and links (at least two experiences and a link).
+        params: ``exp_loops``, ``exp_correction``, ``exp_backend``, ``exp_relax_budget``.
+        backend: the relaxation backend.
+        cursor: the link a budgeted OpenRatSLAM sweep starts at.
+        relax_tol: relative early-stop tolerance, for backends that take ``tol``.
+
+    Returns:
+        The next cursor and whether a fixed point was reached.
+    """
+    loops, correction = params.exp_loops, params.exp_correction
+    alpha = params.exp_backend.startswith("alpha")
+    relax_inplace = getattr(backend, "relax_inplace", None)
+    if alpha and getattr(backend, "schedule", None) == "openratslam":
+        # the map's own arrays: float64, C-contiguous, int64 ends
+        budget = params.exp_relax_budget
+        cursor, fixed = sweep_in_place(
+            s.pose,
+            s.reference_links(),
+            loops=loops,
+            correction=correction,
+            budget=budget,
+            cursor=cursor,
+        )
+        if not (fixed or (bool(budget) and loops * s.e > budget)):
+            log_not_converged(loops, params.exp_backend, s.n)
+    elif callable(relax_inplace):  # alpha_local: relaxed only where the map changed
+        fixed = relax_local(
+            backend,
+            s.pose[: s.n],
+            s.src[: s.e],
+            s.dst[: s.e],
+            s.link[: s.e],
+            loops=loops,
+            correction=correction,
+            budget=params.exp_relax_budget,
+        )
+    else:
+        fixed = relax_with_backend(
+            backend,
+            s.pose[: s.n],
+            s.posegraph(),
+            loops=loops,
+            correction=correction,
+            relax_tol=relax_tol,
+            name=params.exp_backend,
+        )
+        if not fixed and alpha:
+            log_not_converged(loops, params.exp_backend, s.n)
+    s.poses_changed()
+    return cursor, fixed

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from ratslam_graph.experience_map import STATE_FORMAT, STATE_VERSION
+from ratslam_graph.map_state import STATE_FORMAT, STATE_VERSION
 from ratslam_graph.state import ExperienceMapState
 from torchratslam.config import load_config
 from torchratslam.errors import MapFormatError
