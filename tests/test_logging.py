@@ -149,5 +149,5 @@ def test_a_relaxation_that_keeps_moving_is_logged_at_debug(caplog):
     em.apply(Action(ActionKind.LINK, dest_id=0))
     with caplog.at_level(logging.DEBUG, logger="ratslam_graph"):
         em.iterate()
-    (rec,) = [r for r in caplog.records if r.name == "ratslam_graph.experience_map"]
+    (rec,) = [r for r in caplog.records if r.name == "ratslam_graph.relaxation"]
     assert rec.levelno == logging.DEBUG and "1 passes of 'alpha'" in rec.getMessage()
