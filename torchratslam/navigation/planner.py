@@ -71,6 +71,7 @@ def plan_route(
     turns: bool = False,
     min_turn: float = np.pi / 4,
     min_step_m: float = 0.05,
+    turn_back: bool = False,
 ) -> Plan:
     """The temporal map from the robot's place and the route to ``goal``.
 
@@ -100,6 +101,13 @@ def plan_route(
             steps along a corridor past a deleted link (see :func:`turn_pairs`).
         min_step_m: experiences with no link of at least this length (m) were learnt
             turning on the spot and take no turns.
+        turn_back: True (with ``directed``): a route may also turn around at any
+            experience (the turn-around behaviour, ``pi / turn_rate`` s) and follow links
+            against the way they were driven, turning around again to follow them the
+            way they were driven: the paper's links are traversable both ways, and
+            turning around costs its time. Without it a route from a place driven one
+            way only leads on that way (round a loop, or to where the robot once turned
+            around) although the way back along the same links is the short one.
     """
     links = em.store
     n, e = links.n, links.e
@@ -137,11 +145,24 @@ def plan_route(
         goals = np.concatenate([at_goal, at_goal + n])
     else:
         seeds, goals = near, at_goal
+    if turn_back and directed:  # one more layer: the links against their way
+        back = layers * n
+        every = np.arange(n, dtype=np.int64)
+        t_back = np.full(n, np.pi / turn_rate)
+        s, g, w = (
+            np.concatenate([s, links.dst[:e] + back, every, every + back]),
+            np.concatenate([g, links.src[:e] + back, every + back, every]),
+            np.concatenate([w, links.link[:e, 3], t_back, t_back]),
+        )
+        goals = np.concatenate([goals, at_goal + back])
+        layers += 1
     m = layers * n
     src = np.concatenate([s, np.full(len(near), m), goals])
     dst = np.concatenate([g, seeds, np.full(len(goals), m + 1)])
     dgoal = dg[at_goal] / speed
-    dt = np.concatenate([w, d[near] / speed + turn[near] / turn_rate, np.tile(dgoal, layers)])
+    dt = np.concatenate(
+        [w, d[near] / speed + turn[near] / turn_rate, np.tile(dgoal, len(goals) // len(at_goal))]
+    )
     # the two extra nodes are linked one way only: out of the robot's place, into the
     # goal (no shortcut through either)
     tmap = temporal_map(m + 2, start=m, adj=adjacency(m + 2, src, dst, dt, directed=True))
@@ -152,19 +173,23 @@ def plan_route(
         route: Route | None = Route(ids=ids, times=full.times[1:-1])
     except GraphError:
         route = None
-    if turns:
-        tmap = _fold(tmap, n)
+    if layers > 1:
+        tmap = _fold(tmap, n, layers)
     return Plan(route, tmap, ms)
 
 
-def _fold(tmap: TemporalMap, n: int) -> TemporalMap:
-    """The two-layer temporal map as one time stamp per experience (the earlier of its
-    two nodes), then the start and goal nodes."""
+def _fold(tmap: TemporalMap, n: int, layers: int = 2) -> TemporalMap:
+    """The layered temporal map as one time stamp per experience (the earliest of its
+    ``layers`` nodes), then the start and goal nodes."""
     t, par = tmap.times, tmap.parent
-    second = t[n : 2 * n] < t[:n]
-    times = np.concatenate([np.where(second, t[n : 2 * n], t[:n]), t[2 * n :]])
-    parent = np.concatenate([np.where(second, par[n : 2 * n], par[:n]), par[2 * n :]])
-    parent = np.where(parent >= n, parent - n, parent)  # j' is j; the extras follow
+    m = layers * n
+    stack = t[:m].reshape(layers, n)
+    k = np.argmin(stack, axis=0)  # the first layer on ties
+    cols = np.arange(n)
+    times = np.concatenate([stack[k, cols], t[m:]])
+    parent = np.concatenate([par[:m].reshape(layers, n)[k, cols], par[m:]])
+    # a layer's node j is j; the extras follow the experiences
+    parent = np.where(parent >= m, parent - m + n, np.where(parent >= 0, parent % n, parent))
     return TemporalMap(start=n, times=times, parent=parent)
 
 
