@@ -266,7 +266,13 @@ class NavigationAgent:
         while r.time - t0 < limit and not self._arrived(goal):
             now = r.time
             if r.exp_id != last_exp or now - last_plan >= p.replan_s:
-                plan = plan_route(self.em, goal.exp, turns=p.junction_turns, turn_back=p.turn_back)
+                plan = plan_route(
+                    self.em,
+                    goal.exp,
+                    turns=p.junction_turns,
+                    turn_back=p.turn_back,
+                    goal_place=self.goal_place(goal) if p.turn_back and p.arrive_at_place else None,
+                )
                 ms.append(plan.ms)
                 route = plan.route
                 if (

@@ -72,6 +72,7 @@ def plan_route(
     min_turn: float = np.pi / 4,
     min_step_m: float = 0.05,
     turn_back: bool = False,
+    goal_place: np.ndarray | None = None,
 ) -> Plan:
     """The temporal map from the robot's place and the route to ``goal``.
 
@@ -101,13 +102,20 @@ def plan_route(
             steps along a corridor past a deleted link (see :func:`turn_pairs`).
         min_step_m: experiences with no link of at least this length (m) were learnt
             turning on the spot and take no turns.
-        turn_back: True (with ``directed``): a route may also turn around at any
-            experience (the turn-around behaviour, ``pi / turn_rate`` s) and follow links
-            against the way they were driven, turning around again to follow them the
-            way they were driven: the paper's links are traversable both ways, and
-            turning around costs its time. Without it a route from a place driven one
-            way only leads on that way (round a loop, or to where the robot once turned
-            around) although the way back along the same links is the short one.
+        turn_back: True (with ``directed``): a route may also begin by turning around
+            at the current (peak) experience (the turn-around behaviour, ``pi /
+            turn_rate`` s) and follow links against the way they were driven, turning
+            around again anywhere (as long) onto links the way they were driven: the
+            paper's links are traversable both ways, and turning around costs its time.
+            Without it a route from a place driven one way only leads on that way (round
+            a loop, or to where the robot once turned around) although the way back
+            along the same links is the short one. The turn is taken where the robot is
+            only: not at the other experiences near its map position (the map can hold
+            another place there), nor ahead of it.
+        goal_place: the experiences at which a route may end (of those within
+            ``radius_m`` of the goal experience in the map; the goal experience always):
+            the navigator's arrival rule's goal place. None: every experience within
+            ``radius_m`` of the goal experience.
     """
     links = em.store
     n, e = links.n, links.e
@@ -119,7 +127,10 @@ def plan_route(
     near = np.flatnonzero(d <= radius_m)
     near = np.union1d(near, [max(em.current_id, 0)]).astype(np.int64)
     dg = np.hypot(*(poses[:, :2] - poses[goal, :2]).T)
-    at_goal = np.union1d(np.flatnonzero(dg <= radius_m), [goal]).astype(np.int64)
+    ends = np.flatnonzero(dg <= radius_m)
+    if goal_place is not None:
+        ends = np.intersect1d(ends, np.asarray(goal_place, np.int64))
+    at_goal = np.union1d(ends, [goal]).astype(np.int64)
     s, g = links.src[:e], links.dst[:e]
     w = links.link[:e, 3]
     if not directed:
@@ -149,10 +160,11 @@ def plan_route(
         back = layers * n
         every = np.arange(n, dtype=np.int64)
         t_back = np.full(n, np.pi / turn_rate)
-        s, g, w = (
-            np.concatenate([s, links.dst[:e] + back, every, every + back]),
-            np.concatenate([g, links.src[:e] + back, every + back, every]),
-            np.concatenate([w, links.link[:e, 3], t_back, t_back]),
+        cur = np.array([max(em.current_id, 0)], dtype=np.int64)
+        s, g, w = (  # turning around onto them only at the current (peak) experience
+            np.concatenate([s, links.dst[:e] + back, cur, every + back]),
+            np.concatenate([g, links.src[:e] + back, cur + back, every]),
+            np.concatenate([w, links.link[:e, 3], t_back[cur], t_back]),
         )
         goals = np.concatenate([goals, at_goal + back])
         layers += 1

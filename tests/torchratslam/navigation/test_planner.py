@@ -186,6 +186,13 @@ def test_a_route_turns_back_along_links_driven_the_other_way():
     keys = set(zip(em.store.src[: em.store.e].tolist(), em.store.dst[: em.store.e].tolist()))
     for a, b in itertools.pairwise(ids):  # each step a turn on the spot or a link backwards
         assert a == b or (b, a) in keys
+    # one turn, at the current experience: not at another near the robot, nor ahead
+    assert [k for k in range(1, len(ids)) if ids[k] == ids[k - 1]] == [1]
+    assert ids[0] == east[-1]
+    # the goal's place given: the route ends there, not at another experience near it
+    only = plan_route(em, east[1], turn_back=True, goal_place=np.array([east[1]]))
+    assert only.route is not None and only.route.ids[-1] == east[1]
+    assert only.route.total_time == pytest.approx(2.0 + 8.0)
     assert np.all(np.diff(back.route.times) > 0)
     assert np.all(back.tmap.times[: em.store.n] <= ahead.tmap.times[: em.store.n] + 1e-9)
     # the goal ahead: turning back changes nothing
