@@ -103,9 +103,10 @@ def plan_route(
         min_step_m: experiences with no link of at least this length (m) were learnt
             turning on the spot and take no turns.
         turn_back: True (with ``directed``): a route may also begin by turning around
-            at the current (peak) experience (the turn-around behaviour, ``pi /
-            turn_rate`` s) and follow links against the way they were driven, turning
-            around again anywhere (as long) onto links the way they were driven: the
+            at the current (peak) experience (the turn from the robot's heading to the
+            experience's reversed, at ``turn_rate``) and follow links against the way
+            they were driven, turning around again anywhere (``pi / turn_rate`` s) onto
+            links the way they were driven: the
             paper's links are traversable both ways, and turning around costs its time.
             Without it a route from a place driven one way only leads on that way (round
             a loop, or to where the robot once turned around) although the way back
@@ -156,25 +157,28 @@ def plan_route(
         goals = np.concatenate([at_goal, at_goal + n])
     else:
         seeds, goals = near, at_goal
+    seed_t = d[near] / speed + turn[near] / turn_rate
     if turn_back and directed:  # one more layer: the links against their way
         back = layers * n
         every = np.arange(n, dtype=np.int64)
         t_back = np.full(n, np.pi / turn_rate)
-        cur = np.array([max(em.current_id, 0)], dtype=np.int64)
-        s, g, w = (  # turning around onto them only at the current (peak) experience
-            np.concatenate([s, links.dst[:e] + back, cur, every + back]),
-            np.concatenate([g, links.src[:e] + back, cur + back, every]),
-            np.concatenate([w, links.link[:e, 3], t_back[cur], t_back]),
+        s, g, w = (
+            np.concatenate([s, links.dst[:e] + back, every + back]),
+            np.concatenate([g, links.src[:e] + back, every]),
+            np.concatenate([w, links.link[:e, 3], t_back]),
         )
+        # turning around onto them only at the current (peak) experience: the robot
+        # faces its way back by the turn from the robot's heading
+        cur = np.array([max(em.current_id, 0)], dtype=np.int64)
+        seeds = np.concatenate([seeds, cur + back])
+        seed_t = np.concatenate([seed_t, d[cur] / speed + (np.pi - turn[cur]) / turn_rate])
         goals = np.concatenate([goals, at_goal + back])
         layers += 1
     m = layers * n
-    src = np.concatenate([s, np.full(len(near), m), goals])
+    src = np.concatenate([s, np.full(len(seeds), m), goals])
     dst = np.concatenate([g, seeds, np.full(len(goals), m + 1)])
     dgoal = dg[at_goal] / speed
-    dt = np.concatenate(
-        [w, d[near] / speed + turn[near] / turn_rate, np.tile(dgoal, len(goals) // len(at_goal))]
-    )
+    dt = np.concatenate([w, seed_t, np.tile(dgoal, len(goals) // len(at_goal))])
     # the two extra nodes are linked one way only: out of the robot's place, into the
     # goal (no shortcut through either)
     tmap = temporal_map(m + 2, start=m, adj=adjacency(m + 2, src, dst, dt, directed=True))

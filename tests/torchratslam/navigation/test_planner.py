@@ -186,9 +186,14 @@ def test_a_route_turns_back_along_links_driven_the_other_way():
     keys = set(zip(em.store.src[: em.store.e].tolist(), em.store.dst[: em.store.e].tolist()))
     for a, b in itertools.pairwise(ids):  # each step a turn on the spot or a link backwards
         assert a == b or (b, a) in keys
-    # one turn, at the current experience: not at another near the robot, nor ahead
-    assert [k for k in range(1, len(ids)) if ids[k] == ids[k - 1]] == [1]
-    assert ids[0] == east[-1]
+    # one turn, at the start (the current experience faced back: the turn's time is the
+    # start's), not at another experience near the robot, nor ahead
+    assert [k for k in range(1, len(ids)) if ids[k] == ids[k - 1]] == []
+    assert ids[:2] == [east[-1], east[-2]]
+    em.accum_facing = np.pi  # the robot has turned round already: no turn left to take
+    faced = plan_route(em, east[1], turn_back=True).route
+    assert faced is not None and faced.total_time == pytest.approx(8.0)
+    em.accum_facing = 0.0
     # the goal's place given: the route ends there, not at another experience near it
     only = plan_route(em, east[1], turn_back=True, goal_place=np.array([east[1]]))
     assert only.route is not None and only.route.ids[-1] == east[1]
