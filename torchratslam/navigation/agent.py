@@ -203,6 +203,8 @@ class NavigationAgent:
         keys = store.src[:e].astype(np.int64) * (n + 1) + store.dst[:e]
         a, b = ids[:-1], ids[1:]
         ok = (a == b) | np.isin(a * (n + 1) + b, keys)
+        if self.params.turn_back:  # a link followed against its way
+            ok |= np.isin(b * (n + 1) + a, keys)
         if self.params.junction_turns:  # a turn onto a crossing way (planner.turn_pairs)
             gap = np.hypot(*(store.pose[a, :2] - store.pose[b, :2]).T)
             rot = np.abs(wrap_angle(store.pose[a, 2] - store.pose[b, 2]))
@@ -264,7 +266,13 @@ class NavigationAgent:
         while r.time - t0 < limit and not self._arrived(goal):
             now = r.time
             if r.exp_id != last_exp or now - last_plan >= p.replan_s:
-                plan = plan_route(self.em, goal.exp, turns=p.junction_turns)
+                plan = plan_route(
+                    self.em,
+                    goal.exp,
+                    turns=p.junction_turns,
+                    turn_back=p.turn_back,
+                    goal_place=self.goal_place(goal) if p.turn_back and p.arrive_at_place else None,
+                )
                 ms.append(plan.ms)
                 route = plan.route
                 if (

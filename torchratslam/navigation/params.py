@@ -61,6 +61,16 @@ class NavParams:
             paths with the route's shape from the robot on (``arbitrate(...,
             from_robot=True)``); needed where a route must take a turn the robot never
             drove there (edge/adaptation).
+        turn_back: a route may begin by turning around at the current experience and
+            follow links against the way they were driven (``plan_route(...,
+            turn_back=True)``, at the turn-around's time): the paper's links are
+            traversable both ways. Routes then end at the goal's place (with
+            ``arrive_at_place``: :meth:`NavigationAgent.goal_place`'s experiences within
+            1 m of the goal experience in the map), where the robot believes it has
+            arrived, not at any experience near the goal: turned back, a route reaches
+            experiences near the goal facing other ways, whose view is not the goal's.
+            False: a route leads on only the way each link was driven (from a place
+            driven one way only, round a loop or to where the robot once turned around).
     """
 
     lookahead_m: float = 3.0
@@ -79,6 +89,7 @@ class NavParams:
     junction_m: float = 1.5
     overlap_m: float = 1.0
     junction_turns: bool = False
+    turn_back: bool = False
 
     def __post_init__(self) -> None:
         for name in (

@@ -71,6 +71,8 @@ def plan_route(
     turns: bool = False,
     min_turn: float = np.pi / 4,
     min_step_m: float = 0.05,
+    turn_back: bool = False,
+    goal_place: np.ndarray | None = None,
 ) -> Plan:
     """The temporal map from the robot's place and the route to ``goal``.
 
@@ -100,6 +102,21 @@ def plan_route(
             steps along a corridor past a deleted link (see :func:`turn_pairs`).
         min_step_m: experiences with no link of at least this length (m) were learnt
             turning on the spot and take no turns.
+        turn_back: True (with ``directed``): a route may also begin by turning around
+            at the current (peak) experience (the turn from the robot's heading to the
+            experience's reversed, at ``turn_rate``) and follow links against the way
+            they were driven, turning around again anywhere (``pi / turn_rate`` s) onto
+            links the way they were driven: the
+            paper's links are traversable both ways, and turning around costs its time.
+            Without it a route from a place driven one way only leads on that way (round
+            a loop, or to where the robot once turned around) although the way back
+            along the same links is the short one. The turn is taken where the robot is
+            only: not at the other experiences near its map position (the map can hold
+            another place there), nor ahead of it.
+        goal_place: the experiences at which a route may end (of those within
+            ``radius_m`` of the goal experience in the map; the goal experience always):
+            the navigator's arrival rule's goal place. None: every experience within
+            ``radius_m`` of the goal experience.
     """
     links = em.store
     n, e = links.n, links.e
@@ -111,7 +128,10 @@ def plan_route(
     near = np.flatnonzero(d <= radius_m)
     near = np.union1d(near, [max(em.current_id, 0)]).astype(np.int64)
     dg = np.hypot(*(poses[:, :2] - poses[goal, :2]).T)
-    at_goal = np.union1d(np.flatnonzero(dg <= radius_m), [goal]).astype(np.int64)
+    ends = np.flatnonzero(dg <= radius_m)
+    if goal_place is not None:
+        ends = np.intersect1d(ends, np.asarray(goal_place, np.int64))
+    at_goal = np.union1d(ends, [goal]).astype(np.int64)
     s, g = links.src[:e], links.dst[:e]
     w = links.link[:e, 3]
     if not directed:
@@ -137,11 +157,28 @@ def plan_route(
         goals = np.concatenate([at_goal, at_goal + n])
     else:
         seeds, goals = near, at_goal
+    seed_t = d[near] / speed + turn[near] / turn_rate
+    if turn_back and directed:  # one more layer: the links against their way
+        back = layers * n
+        every = np.arange(n, dtype=np.int64)
+        t_back = np.full(n, np.pi / turn_rate)
+        s, g, w = (
+            np.concatenate([s, links.dst[:e] + back, every + back]),
+            np.concatenate([g, links.src[:e] + back, every]),
+            np.concatenate([w, links.link[:e, 3], t_back]),
+        )
+        # turning around onto them only at the current (peak) experience: the robot
+        # faces its way back by the turn from the robot's heading
+        cur = np.array([max(em.current_id, 0)], dtype=np.int64)
+        seeds = np.concatenate([seeds, cur + back])
+        seed_t = np.concatenate([seed_t, d[cur] / speed + (np.pi - turn[cur]) / turn_rate])
+        goals = np.concatenate([goals, at_goal + back])
+        layers += 1
     m = layers * n
-    src = np.concatenate([s, np.full(len(near), m), goals])
+    src = np.concatenate([s, np.full(len(seeds), m), goals])
     dst = np.concatenate([g, seeds, np.full(len(goals), m + 1)])
     dgoal = dg[at_goal] / speed
-    dt = np.concatenate([w, d[near] / speed + turn[near] / turn_rate, np.tile(dgoal, layers)])
+    dt = np.concatenate([w, seed_t, np.tile(dgoal, len(goals) // len(at_goal))])
     # the two extra nodes are linked one way only: out of the robot's place, into the
     # goal (no shortcut through either)
     tmap = temporal_map(m + 2, start=m, adj=adjacency(m + 2, src, dst, dt, directed=True))
@@ -152,19 +189,23 @@ def plan_route(
         route: Route | None = Route(ids=ids, times=full.times[1:-1])
     except GraphError:
         route = None
-    if turns:
-        tmap = _fold(tmap, n)
+    if layers > 1:
+        tmap = _fold(tmap, n, layers)
     return Plan(route, tmap, ms)
 
 
-def _fold(tmap: TemporalMap, n: int) -> TemporalMap:
-    """The two-layer temporal map as one time stamp per experience (the earlier of its
-    two nodes), then the start and goal nodes."""
+def _fold(tmap: TemporalMap, n: int, layers: int = 2) -> TemporalMap:
+    """The layered temporal map as one time stamp per experience (the earliest of its
+    ``layers`` nodes), then the start and goal nodes."""
     t, par = tmap.times, tmap.parent
-    second = t[n : 2 * n] < t[:n]
-    times = np.concatenate([np.where(second, t[n : 2 * n], t[:n]), t[2 * n :]])
-    parent = np.concatenate([np.where(second, par[n : 2 * n], par[:n]), par[2 * n :]])
-    parent = np.where(parent >= n, parent - n, parent)  # j' is j; the extras follow
+    m = layers * n
+    stack = t[:m].reshape(layers, n)
+    k = np.argmin(stack, axis=0)  # the first layer on ties
+    cols = np.arange(n)
+    times = np.concatenate([stack[k, cols], t[m:]])
+    parent = np.concatenate([par[:m].reshape(layers, n)[k, cols], par[m:]])
+    # a layer's node j is j; the extras follow the experiences
+    parent = np.where(parent >= m, parent - m + n, np.where(parent >= 0, parent % n, parent))
     return TemporalMap(start=n, times=times, parent=parent)
 
 

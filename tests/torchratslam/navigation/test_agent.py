@@ -129,3 +129,27 @@ def test_route_hysteresis_keeps_a_route_not_clearly_slower():
     fresh = plan_route(em, goal)
     assert fresh.route is not None and fresh.route.ids[1] == east[0]
     assert _agent(em, route_keep_s=100.0).keep_route(followed, fresh).ids == fresh.route.ids
+
+
+def test_a_route_back_along_links_counts_as_intact_for_route_hysteresis():
+    em = ExperienceMap(ExperienceMapParams(exp_initial_em_deg=0.0, exp_link_time="per_link"))
+    east = [em.store.add_experience(float(x), 0.0, 0.0) for x in range(6)]  # driven east
+    for a, b in itertools.pairwise(east):
+        em.store.add_link(a, b, 1.0, 0.0, 0.0, 2.0)
+    loop = [em.store.add_experience(5.0, 3.0, np.pi), em.store.add_experience(0.0, 3.0, np.pi)]
+    em.store.add_link(east[-1], loop[0], 3.0, 0.0, 0.0, 3.0)
+    em.store.add_link(loop[0], loop[1], 5.0, 0.0, 0.0, 4.0)
+    em.store.add_link(loop[1], east[0], 3.0, 0.0, 0.0, 3.0)
+    _at(em, east[-1])
+    k = em.store.link_index(loop[0], loop[1])
+    em.store.link[k, 3] += 10.0  # the loop was slow when the route was planned
+    followed = plan_route(em, east[0], turn_back=True).route
+    em.store.link[k, 3] -= 10.0
+    assert followed is not None and not set(followed.ids) & set(loop)  # back along east
+    fresh = plan_route(em, east[0], turn_back=True)
+    assert fresh.route is not None and loop[0] in fresh.route.ids  # now 2 s faster
+    kept = _agent(em, turn_back=True, route_keep_s=5.0).keep_route(followed, fresh)
+    assert kept.ids == followed.ids  # its steps back along links are intact
+    # read as links the way they were driven, those steps are broken: the fresh route
+    off = _agent(em, turn_back=False, route_keep_s=5.0).keep_route(followed, fresh)
+    assert off.ids != followed.ids and loop[0] in off.ids

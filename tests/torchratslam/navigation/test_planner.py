@@ -3,6 +3,7 @@
 import itertools
 
 import numpy as np
+import pytest
 
 from ratslam_graph.experience_map import ExperienceMap
 from ratslam_graph.geometry import wrap_angle
@@ -159,3 +160,47 @@ def test_arbitration_follows_the_route_s_shape_from_the_robot_not_its_offset():
     # by map positions the route looks like the way back
     b3, _ = arbitrate(paths, pose, pose, route, lookahead_m=3.0, turn_margin_m=0.6)
     assert b3 is Behaviour.TURN_AROUND
+
+
+def test_a_route_turns_back_along_links_driven_the_other_way():
+    em = ExperienceMap(ExperienceMapParams(exp_initial_em_deg=0.0, exp_link_time="per_link"))
+    s = np.arange(0.0, 5.01, 1.0)
+    east = _chain(em, np.c_[s, np.zeros(6)], 0.0)  # a square loop driven anticlockwise
+    north = _chain(em, np.c_[np.full(6, 6.0), s], np.pi / 2)
+    west = _chain(em, np.c_[6.0 - s, np.full(6, 6.0)], np.pi)
+    south = _chain(em, np.c_[np.zeros(5), 5.0 - s[:5]], -np.pi / 2)
+    for a, b in ((east[-1], north[0]), (north[-1], west[0]), (west[-1], south[0])):
+        em.store.add_link(a, b, 1.0, 0.0, 0.0, 2.0)
+    em.store.add_link(south[-1], east[0], 1.0, 0.0, 0.0, 2.0)
+    em.set_current(east[-1])  # at the east end, facing east; the goal is behind
+    ahead = plan_route(em, east[1])
+    assert ahead.route is not None and north[0] in ahead.route.ids  # round the loop
+    back = plan_route(em, east[1], turn_back=True)
+    assert back.route is not None
+    ids = back.route.ids
+    # turn around (pi at pi/2 rad/s: 2 s), 4 m back at 0.5 m/s (the goal's place is
+    # reached within 1 m of it: the goal node's time makes up the last metre)
+    assert back.route.total_time == pytest.approx(2.0 + 8.0)
+    assert ahead.route.total_time > back.route.total_time + 20.0
+    assert set(ids) <= set(east) and ids[0] in east[-2:]  # (the robot's place: within 1 m)
+    keys = set(zip(em.store.src[: em.store.e].tolist(), em.store.dst[: em.store.e].tolist()))
+    for a, b in itertools.pairwise(ids):  # each step a turn on the spot or a link backwards
+        assert a == b or (b, a) in keys
+    # one turn, at the start (the current experience faced back: the turn's time is the
+    # start's), not at another experience near the robot, nor ahead
+    assert [k for k in range(1, len(ids)) if ids[k] == ids[k - 1]] == []
+    assert ids[:2] == [east[-1], east[-2]]
+    em.accum_facing = np.pi  # the robot has turned round already: no turn left to take
+    faced = plan_route(em, east[1], turn_back=True).route
+    assert faced is not None and faced.total_time == pytest.approx(8.0)
+    em.accum_facing = 0.0
+    # the goal's place given: the route ends there, not at another experience near it
+    only = plan_route(em, east[1], turn_back=True, goal_place=np.array([east[1]]))
+    assert only.route is not None and only.route.ids[-1] == east[1]
+    assert only.route.total_time == pytest.approx(2.0 + 8.0)
+    assert np.all(np.diff(back.route.times) > 0)
+    assert np.all(back.tmap.times[: em.store.n] <= ahead.tmap.times[: em.store.n] + 1e-9)
+    # the goal ahead: turning back changes nothing
+    em.set_current(east[0])
+    fwd = plan_route(em, east[-1], turn_back=True)
+    assert fwd.route is not None and fwd.route.ids == plan_route(em, east[-1]).route.ids
