@@ -25,6 +25,7 @@ import numpy as np
 from numba import njit
 
 _LOG_2PI = math.log(2.0 * math.pi)
+_TWO_PI = 2.0 * math.pi
 _SKIP_D = 41.6
 """``|a - b|`` above which ``exp(-|a - b|) < 2**-60``, below the last bit of the product
 of the corrections (at least 1)."""
@@ -149,3 +150,125 @@ def updated_logs(  # pragma: no cover - compiled
             s += v if v > log_floor else log_floor
         out[k] = s
     return out
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def gauss_logp(  # pragma: no cover - compiled
+    x: np.ndarray,
+    mean: np.ndarray,
+    cov: np.ndarray,
+    logdet: np.ndarray,
+    ang: np.ndarray,
+    n: int,
+) -> np.ndarray:
+    """Per node Eq. 5 with a diagonal covariance, ``-0.5 (D log 2pi + log det + q)``,
+    ``q = sum_i (x_i - mu_ji)^2 / s2_ji``; angular dimensions (``ang``) wrapped to
+    ``[-pi, pi)`` first. Shape: (n,)."""
+    dim = x.shape[0]
+    out = np.empty(n)
+    for j in range(n):
+        q = 0.0
+        for i in range(dim):
+            d = x[i] - mean[j, i]
+            if ang[i]:
+                d = (d + math.pi) % _TWO_PI - math.pi
+            q += d * d / cov[j, i]
+        out[j] = -0.5 * (dim * _LOG_2PI + logdet[j] + q)
+    return out
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def normalise(logp: np.ndarray, logprior: np.ndarray) -> np.ndarray:  # pragma: no cover
+    """Eqs. 1, 4 in log space: ``joint - logsumexp(joint)``, ``joint = logp + logprior``."""
+    n = logp.shape[0]
+    joint = logp + logprior
+    m = joint.max()
+    if not math.isfinite(m):
+        m = 0.0
+    s = 0.0
+    for j in range(n):
+        s += math.exp(joint[j] - m)
+    return joint - (math.log(s) + m)
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def combine(terms: np.ndarray) -> np.ndarray:  # pragma: no cover - compiled
+    """Eq. 3 in log space: ``logsumexp`` over the channels (rows) of
+    ``log alpha_k + log P(w_j | x_k)``. Shape: (K, n) -> (n,)."""
+    k, n = terms.shape
+    out = np.empty(n)
+    for j in range(n):
+        m = terms[0, j]
+        for c in range(1, k):
+            m = max(m, terms[c, j])
+        if not math.isfinite(m):
+            out[j] = m
+            continue
+        s = 0.0
+        for c in range(k):
+            s += math.exp(terms[c, j] - m)
+        out[j] = math.log(s) + m
+    return out
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def updated_logs_ang(  # pragma: no cover - compiled
+    x: np.ndarray,
+    mean: np.ndarray,
+    cov: np.ndarray,
+    logcov: np.ndarray,
+    ang: np.ndarray,
+    n: int,
+    ab: np.ndarray,
+    loga: np.ndarray,
+    log_floor: float,
+) -> np.ndarray:
+    """:func:`updated_logs` of the first ``n`` nodes of a small channel with angular
+    dimensions (``ang``, differences wrapped to ``[-pi, pi)``). Shape: (n,)."""
+    dim = x.shape[0]
+    out = np.empty(n)
+    for j in range(n):
+        s = 0.0
+        for i in range(dim):
+            d = x[i] - mean[j, i]
+            if ang[i]:
+                d = (d + math.pi) % _TWO_PI - math.pi
+            v = math.log1p(d * d / cov[j, i] * ab[j]) + logcov[j, i] + loga[j]
+            s += v if v > log_floor else log_floor
+        out[j] = s
+    return out
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def learn_diag(  # pragma: no cover - compiled
+    mean: np.ndarray,
+    cov: np.ndarray,
+    logcov: np.ndarray,
+    logdet: np.ndarray,
+    j: int,
+    x: np.ndarray,
+    ang: np.ndarray,
+    a: float,
+    b: float,
+    floor: float,
+) -> None:
+    """Learn ``x`` into node ``j`` of a diagonal channel, in place (Eqs. 9-10):
+    ``mu += b d``, ``s2 = max(a s2 + b (a d)^2, floor)``, angular dimensions wrapped to
+    ``[-pi, pi)``; ``logcov``, ``logdet`` follow."""
+    s = 0.0
+    for i in range(x.shape[0]):
+        d = x[i] - mean[j, i]
+        if ang[i]:
+            d = (d + math.pi) % _TWO_PI - math.pi
+        mu = mean[j, i] + b * d  # Eq. 9
+        if ang[i]:
+            mu = (mu + math.pi) % _TWO_PI - math.pi
+        dn = a * d
+        v = a * cov[j, i] + b * (dn * dn)  # Eq. 10
+        v = v if v > floor else floor
+        cov[j, i] = v
+        lv = math.log(v)
+        logcov[j, i] = lv
+        s += lv
+        mean[j, i] = mu
+    logdet[j] = s

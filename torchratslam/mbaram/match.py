@@ -157,6 +157,11 @@ def log_match(
     Returns:
         ``log M_j`` (shape (N,)) and the :class:`Vigilance` of every node.
     """
+    if COMPILED and counts.dtype == torch.float64:
+        from torchratslam.mbaram import compiled
+
+        if compiled.eligible(channels, names):
+            return compiled.log_match(channels, x, names, weights, params, counts, prior, memo)
     n = len(counts)
     logprior = prior.log()
     a = counts / (counts + 1.0)  # N/(N+1)
@@ -184,21 +189,9 @@ def log_match(
     return log_m, Vigilance(passed, tuple(lazy))
 
 
-def _compiled(ch: ChannelNodes, x: torch.Tensor) -> bool:
-    """Whether a diagonal laser channel's terms run in the numba kernels (float64 on
-    the CPU); otherwise the tensor path computes them."""
-    return (
-        COMPILED
-        and not ch.full
-        and ch.dtype == torch.float64
-        and ch.device.type == "cpu"
-        and x.dtype == torch.float64
-    )
-
-
 COMPILED = True
-"""Compute the outlier laser channels with :mod:`torchratslam.mbaram._kernels` (False:
-the tensor path, the reference the kernels are tested against)."""
+"""Match diagonal float64 maps on the CPU with :mod:`torchratslam.mbaram.compiled`
+(False: the tensor path below, the reference the compiled one is tested against)."""
 
 
 def _channel_terms(
@@ -217,8 +210,6 @@ def _channel_terms(
     eps = params.laser_outlier
     outlier = eps > 0 and k != "odometry" and not ch.full
     log_u = math.log(eps / (params.laser_max_range * params.laser_scale)) if outlier else 0.0
-    if outlier and _compiled(ch, x):
-        return _compiled_terms(ch, x, params, a, b, logprior, s_max, log_u)
     d = ch.diff(x, n)  # (n, D)
     if ch.full:
         q = ch.maha(d, n)
@@ -248,42 +239,6 @@ def _channel_terms(
     return logpost, Vigilance(logs <= math.log(s_max))  # Eq. 7
 
 
-def _compiled_terms(
-    ch: ChannelNodes,
-    x: torch.Tensor,
-    params: MBARAMParams,
-    a: torch.Tensor,
-    b: torch.Tensor,
-    logprior: torch.Tensor,
-    s_max: float,
-    log_u: float,
-) -> tuple[torch.Tensor, Vigilance]:
-    """:func:`_channel_terms` of a diagonal laser channel with the outlier term, in the
-    numba kernels; the updated-node vigilance is computed for the nodes asked only."""
-    from torchratslam.mbaram._kernels import outlier_logp, updated_logs
-
-    n = len(a)
-    xs = x.numpy()
-    mean, cov, logcov = ch.mean.numpy(), ch.cov.numpy(), ch.logcov.numpy()
-    logp = torch.from_numpy(
-        outlier_logp(xs, mean, cov, logcov, n, math.log1p(-params.laser_outlier), log_u)
-    )
-    joint = logp + logprior
-    logpost = joint - torch.logsumexp(joint, 0)  # Eqs. 1, 4
-    log_smax = math.log(s_max)
-    if params.vigilance == "current":
-        return logpost, Vigilance(ch.logdet[:n] <= log_smax)
-    ab, loga = (a * b).numpy(), a.log().numpy()
-    floor = ch.log_floor
-
-    def test(rows: torch.Tensor) -> torch.Tensor:
-        idx = rows.numpy().astype(np.int64, copy=False)
-        logs = updated_logs(xs, mean, cov, logcov, idx, ab, loga, floor)
-        return torch.from_numpy(logs <= log_smax)  # Eq. 7
-
-    return logpost, Vigilance(torch.ones(n, dtype=torch.bool), (test,))
-
-
 def select(log_m: torch.Tensor, passed: Vigilance | torch.Tensor) -> MatchResult:
     """The best node that passes vigilance ("reset the winner and try the next best",
     without a loop over nodes): candidates ordered once by ``log M_j`` (Eq. 6); the
@@ -293,10 +248,15 @@ def select(log_m: torch.Tensor, passed: Vigilance | torch.Tensor) -> MatchResult
     Shape:
         log_m, passed: (N,) with N >= 1.
     """
-    order = torch.argsort(log_m, descending=True, stable=True)  # Eq. 6, then next best
-    best = int(order[0])
     vig = passed if isinstance(passed, Vigilance) else Vigilance(passed)
-    ranks = torch.nonzero(vig.base[order]).squeeze(1)  # candidates passing the eager channels
+    if log_m.device.type == "cpu" and vig.base.device.type == "cpu":
+        # numpy's stable sort of -log M is torch's stable descending sort, cheaper
+        order = torch.from_numpy(np.argsort(-log_m.numpy(), kind="stable"))
+        ranks = torch.from_numpy(np.flatnonzero(vig.base.numpy()[order.numpy()]))
+    else:
+        order = torch.argsort(log_m, descending=True, stable=True)  # Eq. 6, then next best
+        ranks = torch.nonzero(vig.base[order]).squeeze(1)  # passing the eager channels
+    best = int(order[0])
     start, size = 0, 1
     while start < len(ranks):
         block = ranks[start : start + size] if vig.lazy else ranks
@@ -320,6 +280,18 @@ def learn_node(ch: ChannelNodes, j: int, x: torch.Tensor, a: float, b: float) ->
         b: ``1 / (N_j + 1)``.
     """
     floor = ch.floor
+    if (
+        COMPILED
+        and not ch.full
+        and ch.dtype == torch.float64
+        and ch.device.type == "cpu"
+        and x.dtype == torch.float64
+    ):
+        from torchratslam.mbaram._kernels import learn_diag
+
+        m, c, lc, ld = ch.mean.numpy(), ch.cov.numpy(), ch.logcov.numpy(), ch.logdet.numpy()
+        learn_diag(m, c, lc, ld, j, x.numpy(), ch.ang.numpy(), a, b, floor)
+        return
     d = x - ch.mean[j]
     if ch.has_ang:
         d = torch.where(ch.ang, wrap_angle(d), d)

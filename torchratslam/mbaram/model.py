@@ -194,7 +194,8 @@ class MBARAM:
                     f"MBARAM channel {k!r} must be a non-empty 1-D vector, "
                     f"got shape {tuple(x.shape)}"
                 )
-            if not bool(torch.isfinite(x).all()):
+            finite = np.isfinite(x.numpy()) if x.device.type == "cpu" else torch.isfinite(x)
+            if not bool(finite.all()):
                 bad = int((~torch.isfinite(x)).sum())
                 raise InputError(
                     f"MBARAM channel {k!r} has {bad} NaN/inf value(s); clean the input first "
