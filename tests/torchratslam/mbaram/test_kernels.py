@@ -70,16 +70,28 @@ def session_frames():
     return list(laser_frames(session, 0, len(session)))
 
 
-@pytest.mark.parametrize("preset", ["sim", "dense"])
-def test_compiled_run_is_the_tensor_paths_bit_for_bit(session_frames, preset, monkeypatch):
-    params = MBARAMParams.from_dict(PRESETS[preset])
-    assert params.laser_outlier > 0  # the compiled channels are used
+GAUSS = {"laser_scale": 3.0, "s_max_odometry": 2e-5, "var_floor_odometry": 0.01}
+"""Gaussian laser channels (no outlier term) with nodes about as long as the sim preset's."""
+
+
+@pytest.mark.parametrize(
+    ("settings", "least"),
+    [
+        (PRESETS["sim"], 20),
+        (PRESETS["dense"], 20),
+        (PRESETS["paper"], 2),
+        (GAUSS, 20),
+        ({**PRESETS["sim"], "vigilance": "current", "s_max": 1e-300}, 2),
+    ],
+)
+def test_compiled_run_is_the_tensor_paths_bit_for_bit(session_frames, settings, least, monkeypatch):
+    params = MBARAMParams.from_dict(settings)
     out = {}
     for compiled in (True, False):
         monkeypatch.setattr(match, "COMPILED", compiled)
         out[compiled] = run_mbaram([session_frames], [], params)
     a, b = out[True], out[False]
-    assert a.metrics["nodes"] > 20
+    assert a.metrics["nodes"] > least
     assert a.metrics == b.metrics
     for field in ("winners", "node_xy", "loc_with", "loc_without", "path"):
         assert np.array_equal(getattr(a, field), getattr(b, field)), field
