@@ -1,17 +1,27 @@
-"""MBARAM's laser-channel terms compiled with numba (imported lazily): one pass over
-the nodes' beams per input, no temporaries.
+"""MBARAM's match kernels compiled with numba (imported lazily by
+:mod:`torchratslam.mbaram.compiled`): one pass over the nodes' dimensions per input and
+channel, no temporaries.
 
-:func:`outlier_logp` is the log likelihood of a diagonal laser channel with the beam
-outlier term, ``sum_i logaddexp(log N_i, log U)``, per node; :func:`updated_logs` is
-Eq. 8's ``log S'`` of the node after tentatively learning the input (Eq. 10, floored),
-for the nodes asked only (the vigilance is tested on the candidates in order, so
-usually on one node). The elementwise operations are those of the tensor path in
-:mod:`torchratslam.mbaram.match`, in its order; ``logaddexp(a, b)`` is
-``max(a, b) + log1p(exp(-|a - b|))`` as torch computes it, and the correction is
-summed as the log of a product (one ``log`` per 32 beams). The beams are summed in
-order, where torch sums in blocks, so the last bits of a node's log likelihood (about
--1e3 to -1e4) may differ from the tensor path's (by ~1e-12); the map, the winners and
-the localisations do not (tested against the tensor path).
+* :func:`outlier_logp`: the log likelihood of a diagonal laser channel with the beam
+  outlier term, ``sum_i logaddexp(log N_i, log U)``, per node. ``logaddexp(a, b)`` is
+  ``max(a, b) + log1p(exp(-|a - b|))`` as torch computes it; the maxima are summed and
+  the corrections as the log of their product (one ``log`` per 32 beams), ``exp`` by
+  :func:`_exp_neg`, a polynomial the loop vectorises;
+* :func:`gauss_logp`: Eq. 5 of a diagonal channel (angular dimensions wrapped);
+* :func:`normalise`, :func:`combine`: Eqs. 1, 4 and Eq. 3 in log space (logsumexp as
+  torch computes it: the maximum, then the log of the sum of the exponentials);
+* :func:`updated_logs`, :func:`updated_logs_ang`: Eq. 8's ``log S'`` of a node after
+  tentatively learning the input (Eq. 10, floored): for the nodes asked (the lasers,
+  whose vigilance is tested on the candidates in order, usually one node) or for all
+  nodes of a small channel with angular dimensions (the odometry);
+* :func:`learn_diag`: Eqs. 9-10 for one node, in place.
+
+The elementwise operations are the tensor path's (:mod:`torchratslam.mbaram.match`) in
+its order; logarithms and exponentials are the C library's or :func:`_exp_neg` (within
+a few ulp), and sums run in order where torch sums in blocks, so the last bits of a
+node's log likelihood (about -1e3 to -1e4) may differ from the tensor path's (by
+~1e-11); the map, the winners and the localisations do not (tested against the tensor
+path).
 
 Compiled functions are cached on disk by numba (``cache=True``); the first use in a
 fresh environment compiles them (a few seconds).

@@ -1,5 +1,9 @@
 """MBARAM's match and vigilance math: per-channel node statistics, the log match
-``log M_j`` with the vigilance test, the choice of the winner and the learning rule."""
+``log M_j`` with the vigilance test, the choice of the winner and the learning rule.
+
+The tensor operations here are the reference; diagonal float64 maps on the CPU run the
+same equations compiled (:mod:`torchratslam.mbaram.compiled`, :data:`COMPILED`), with the
+same maps, winners and localisations."""
 
 from __future__ import annotations
 
