@@ -1,19 +1,24 @@
 """MBARAM's match and vigilance math: per-channel node statistics, the log match
-``log M_j`` with the vigilance test, the choice of the winner and the learning rule."""
+``log M_j`` with the vigilance test, the choice of the winner and the learning rule.
+
+The tensor operations here are the reference; diagonal float64 maps on the CPU run the
+same equations compiled (:mod:`torchratslam.mbaram.compiled`, :data:`COMPILED`), with the
+same maps, winners and localisations."""
 
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
 
+import numpy as np
 import torch
 
 from ratslam_graph.geometry import wrap_angle
 from torchratslam.errors import ConfigError
 from torchratslam.mbaram.params import MBARAMParams
 
-__all__ = ["ChannelNodes", "MatchResult", "learn_node", "log_match", "select"]
+__all__ = ["ChannelNodes", "MatchResult", "Vigilance", "learn_node", "log_match", "select"]
 
 _LOG_2PI = math.log(2.0 * math.pi)
 
@@ -95,6 +100,35 @@ class ChannelNodes:
         return z.squeeze(-1).square().sum(-1)
 
 
+@dataclass(frozen=True)
+class Vigilance:
+    """The vigilance test (Eqs. 7-8) of every node: a pass mask of the channels
+    computed at once (``base``) and the channels tested only on the nodes asked
+    (``lazy``: a function from node indices to their pass mask), the 682-beam laser
+    channels, whose test :func:`select` needs on the candidates it reaches only.
+
+    Attributes:
+        base: pass mask of the eager channels. Shape: (N,).
+        lazy: per lazy channel, ``rows (K,) -> pass mask (K,)``.
+    """
+
+    base: torch.Tensor
+    lazy: tuple[Callable[[torch.Tensor], torch.Tensor], ...] = field(default=())
+
+    def rows(self, idx: torch.Tensor) -> torch.Tensor:
+        """The pass mask of the nodes ``idx`` in every channel. Shape: (K,)."""
+        ok = self.base[idx]
+        for f in self.lazy:
+            ok = ok & f(idx)
+        return ok
+
+    def mask(self) -> torch.Tensor:
+        """The pass mask of every node in every channel. Shape: (N,)."""
+        if not self.lazy:
+            return self.base
+        return self.rows(torch.arange(len(self.base), device=self.base.device))
+
+
 def log_match(
     channels: Mapping[str, ChannelNodes],
     x: Mapping[str, torch.Tensor],
@@ -104,8 +138,8 @@ def log_match(
     counts: torch.Tensor,
     prior: torch.Tensor,
     device: torch.device,
-    memo: dict[str, tuple[torch.Tensor, torch.Tensor, torch.Tensor]] | None = None,
-) -> tuple[torch.Tensor, torch.Tensor]:
+    memo: dict[str, tuple[torch.Tensor, torch.Tensor, Vigilance]] | None = None,
+) -> tuple[torch.Tensor, Vigilance]:
     """``log M_j`` (Eqs. 1-6 in log space) and the vigilance pass mask (Eqs. 7-8) of
     every node.
 
@@ -118,15 +152,20 @@ def log_match(
         counts: ``N_j`` of every node. Shape: (N,).
         prior: ``P(w_j)`` of every node. Shape: (N,).
         device: the device of the node statistics.
-        memo: channel -> (input, log posterior, pass mask) of the last input seen on an
+        memo: channel -> (input, log posterior, vigilance) of the last input seen on an
             unchanged map: a channel whose input equals the stored one reuses its terms
             (the same numbers, computed once), e.g. the laser channels of one frame
             localised with and without odometry. The caller clears it when the map
             changes; None computes every channel.
 
     Returns:
-        ``log M_j`` and the pass mask, both of shape (N,).
+        ``log M_j`` (shape (N,)) and the :class:`Vigilance` of every node.
     """
+    if COMPILED and counts.dtype == torch.float64:
+        from torchratslam.mbaram import compiled
+
+        if compiled.eligible(channels, names):
+            return compiled.log_match(channels, x, names, weights, params, counts, prior, memo)
     n = len(counts)
     logprior = prior.log()
     a = counts / (counts + 1.0)  # N/(N+1)
@@ -136,6 +175,7 @@ def log_match(
         raise ConfigError(f"MBARAM channels {list(names)} all have weight 0; use others")
     log_terms = []
     passed = torch.ones(n, dtype=torch.bool, device=device)
+    lazy: list[Callable[[torch.Tensor], torch.Tensor]] = []
     for k in names:
         hit = memo.get(k) if memo is not None else None
         if hit is not None and torch.equal(hit[0], x[k]):
@@ -147,9 +187,15 @@ def log_match(
                 memo[k] = (x[k].clone(), logpost, ok)
         if weights[k] > 0:
             log_terms.append(math.log(weights[k] / wsum) + logpost)
-        passed &= ok
+        passed &= ok.base
+        lazy.extend(ok.lazy)
     log_m = torch.logsumexp(torch.stack(log_terms), 0)  # Eq. 3 in log space
-    return log_m, passed
+    return log_m, Vigilance(passed, tuple(lazy))
+
+
+COMPILED = True
+"""Match diagonal float64 maps on the CPU with :mod:`torchratslam.mbaram.compiled`
+(False: the tensor path below, the reference the compiled one is tested against)."""
 
 
 def _channel_terms(
@@ -161,20 +207,21 @@ def _channel_terms(
     b: torch.Tensor,
     logprior: torch.Tensor,
     s_max: float,
-) -> tuple[torch.Tensor, torch.Tensor]:
+) -> tuple[torch.Tensor, Vigilance]:
     """One channel's log posterior ``log P(w_j | x_k)`` (Eqs. 1, 4, 5) and its vigilance
-    pass mask (Eqs. 7-8, 10) over the N nodes of :func:`log_match`. Shape: (N,) each."""
+    (Eqs. 7-8, 10) over the N nodes of :func:`log_match`. Shape: (N,) each."""
     n = len(a)
+    eps = params.laser_outlier
+    outlier = eps > 0 and k != "odometry" and not ch.full
+    log_u = math.log(eps / (params.laser_max_range * params.laser_scale)) if outlier else 0.0
     d = ch.diff(x, n)  # (n, D)
     if ch.full:
         q = ch.maha(d, n)
     else:
         r = d.square_().div_(ch.cov[:n])  # (x - mu)^2 / sigma^2 per dimension
-    eps = params.laser_outlier
-    if eps > 0 and k != "odometry" and not ch.full:
+    if outlier:
         # per beam log((1 - eps) N(x; mu, s2) + eps / R): a beam blocked by a
         # pedestrian or a moved box costs at most -log(eps / R), not (x - mu)^2 / s2
-        log_u = math.log(eps / (params.laser_max_range * params.laser_scale))
         logn = (r + ch.logcov[:n] + _LOG_2PI).mul_(-0.5).add_(math.log1p(-eps))
         logp = torch.logaddexp(logn, torch.full_like(logn, log_u)).sum(-1)
     else:
@@ -193,24 +240,37 @@ def _channel_terms(
         # as learning floors it; log S' = sum of the logs (Eq. 8)
         logv = r.mul_((a * b)[:, None]).log1p_().add_(ch.logcov[:n]).add_(a.log()[:, None])
         logs = logv.clamp_min_(ch.log_floor).sum(-1)
-    return logpost, logs <= math.log(s_max)  # Eq. 7
+    return logpost, Vigilance(logs <= math.log(s_max))  # Eq. 7
 
 
-def select(log_m: torch.Tensor, passed: torch.Tensor) -> MatchResult:
+def select(log_m: torch.Tensor, passed: Vigilance | torch.Tensor) -> MatchResult:
     """The best node that passes vigilance ("reset the winner and try the next best",
-    without a loop over nodes): candidates ordered once by ``log M_j`` (Eq. 6).
+    without a loop over nodes): candidates ordered once by ``log M_j`` (Eq. 6); the
+    lazy channels of a :class:`Vigilance` are tested on the candidates in that order,
+    one, then blocks growing eightfold, until one passes.
 
     Shape:
         log_m, passed: (N,) with N >= 1.
     """
-    order = torch.argsort(log_m, descending=True, stable=True)  # Eq. 6, then next best
-    ok = passed[order]
+    vig = passed if isinstance(passed, Vigilance) else Vigilance(passed)
+    if log_m.device.type == "cpu" and vig.base.device.type == "cpu":
+        # numpy's stable sort of -log M is torch's stable descending sort, cheaper
+        order = torch.from_numpy(np.argsort(-log_m.numpy(), kind="stable"))
+        ranks = torch.from_numpy(np.flatnonzero(vig.base.numpy()[order.numpy()]))
+    else:
+        order = torch.argsort(log_m, descending=True, stable=True)  # Eq. 6, then next best
+        ranks = torch.nonzero(vig.base[order]).squeeze(1)  # passing the eager channels
     best = int(order[0])
-    if not bool(ok.any()):
-        return MatchResult(-1, best=best)
-    rank = int(torch.argmax(ok.to(torch.int8)))
-    node = int(order[rank])
-    return MatchResult(node, rank=rank, log_m=float(log_m[node]), best=best)
+    start, size = 0, 1
+    while start < len(ranks):
+        block = ranks[start : start + size] if vig.lazy else ranks
+        ok = vig.rows(order[block]) if vig.lazy else torch.ones(len(block), dtype=torch.bool)
+        if bool(ok.any()):
+            rank = int(block[int(torch.argmax(ok.to(torch.int8)))])
+            node = int(order[rank])
+            return MatchResult(node, rank=rank, log_m=float(log_m[node]), best=best)
+        start, size = start + len(block), size * 8
+    return MatchResult(-1, best=best)
 
 
 def learn_node(ch: ChannelNodes, j: int, x: torch.Tensor, a: float, b: float) -> None:
@@ -224,6 +284,18 @@ def learn_node(ch: ChannelNodes, j: int, x: torch.Tensor, a: float, b: float) ->
         b: ``1 / (N_j + 1)``.
     """
     floor = ch.floor
+    if (
+        COMPILED
+        and not ch.full
+        and ch.dtype == torch.float64
+        and ch.device.type == "cpu"
+        and x.dtype == torch.float64
+    ):
+        from torchratslam.mbaram._kernels import learn_diag
+
+        m, c, lc, ld = ch.mean.numpy(), ch.cov.numpy(), ch.logcov.numpy(), ch.logdet.numpy()
+        learn_diag(m, c, lc, ld, j, x.numpy(), ch.ang.numpy(), a, b, floor)
+        return
     d = x - ch.mean[j]
     if ch.has_ang:
         d = torch.where(ch.ang, wrap_angle(d), d)

@@ -59,7 +59,14 @@ import torch
 
 from ratslam_graph.geometry import wrap_angle
 from torchratslam.errors import ConfigError, InputError, MapFormatError
-from torchratslam.mbaram.match import ChannelNodes, MatchResult, learn_node, log_match, select
+from torchratslam.mbaram.match import (
+    ChannelNodes,
+    MatchResult,
+    Vigilance,
+    learn_node,
+    log_match,
+    select,
+)
 from torchratslam.mbaram.params import STATE_VERSION, MBARAMParams
 from torchratslam.mbaram.tracking import filter_step, transition_matrix
 
@@ -130,7 +137,7 @@ class MBARAM:
         self._track: dict[tuple[str, ...], torch.Tensor] = {}
         self._transition: torch.Tensor | None = None
         # per channel, the terms of the last localised input on this map (log_match's memo)
-        self._memo: dict[str, tuple[torch.Tensor, torch.Tensor, torch.Tensor]] = {}
+        self._memo: dict[str, tuple[torch.Tensor, torch.Tensor, Vigilance]] = {}
 
     def __len__(self) -> int:
         return self._n
@@ -187,7 +194,8 @@ class MBARAM:
                     f"MBARAM channel {k!r} must be a non-empty 1-D vector, "
                     f"got shape {tuple(x.shape)}"
                 )
-            if not bool(torch.isfinite(x).all()):
+            finite = np.isfinite(x.numpy()) if x.device.type == "cpu" else torch.isfinite(x)
+            if not bool(finite.all()):
                 bad = int((~torch.isfinite(x)).sum())
                 raise InputError(
                     f"MBARAM channel {k!r} has {bad} NaN/inf value(s); clean the input first "
@@ -215,8 +223,8 @@ class MBARAM:
     # ------------------------------------------------------------- the model
     def _evaluate(
         self, x: dict[str, torch.Tensor], names: Sequence[str], *, memo: bool = False
-    ) -> tuple[torch.Tensor, torch.Tensor]:
-        """``log M_j`` (N,) and the vigilance pass mask (N,) of every node (``memo``: a
+    ) -> tuple[torch.Tensor, Vigilance]:
+        """``log M_j`` (N,) and the vigilance of every node (``memo``: a
         channel whose input equals the last localised one reuses its terms)."""
         n = self._n
         return log_match(
@@ -264,7 +272,7 @@ class MBARAM:
         x = self._check(inputs, names)
         if self._n == 0:
             return torch.zeros(0, dtype=torch.bool, device=self.device)
-        return self._evaluate(x, names)[1]
+        return self._evaluate(x, names)[1].mask()
 
     def localise(
         self, inputs: Mapping[str, Any], channels: Iterable[str] | None = None

@@ -34,6 +34,10 @@ __all__ = ["Camera", "cast_rays", "render"]
 
 _FAR = 1e6
 
+COMPILED = True
+"""Cast rays with :func:`torchratslam.sim._rays.nearest_hits` (one compiled pass, the same
+numbers bit for bit); False: the array path below, the reference it is tested against."""
+
 
 def cast_rays(
     world: World, origin: tuple[float, float], angles: np.ndarray
@@ -52,6 +56,18 @@ def cast_rays(
     """
     angles = np.asarray(angles, np.float64)
     seg = world.segments
+    if COMPILED and angles.ndim == 1 and len(seg):
+        from torchratslam.sim._rays import nearest_hits
+
+        return nearest_hits(
+            np.cos(angles),
+            np.sin(angles),
+            seg[:, 0] - origin[0],
+            seg[:, 1] - origin[1],
+            seg[:, 2] - seg[:, 0],
+            seg[:, 3] - seg[:, 1],
+            world.lengths,
+        )
     rx, ry = np.cos(angles)[:, None], np.sin(angles)[:, None]
     px, py = seg[None, :, 0] - origin[0], seg[None, :, 1] - origin[1]
     ex, ey = seg[None, :, 2] - seg[None, :, 0], seg[None, :, 3] - seg[None, :, 1]

@@ -57,7 +57,7 @@ def test_memo_gives_the_numbers_of_a_fresh_computation(overrides):
             t = m._check(x, names)
             got_m, got_p = m._evaluate(t, names, memo=True)
             assert torch.equal(got_m, want_m)
-            assert torch.equal(got_p, want_p)
+            assert torch.equal(got_p.mask(), want_p.mask())
         if step % 5 == 4:
             m.learn(_inputs(rng, step % 11))  # the map changes: the memo must not be reused
 
@@ -78,4 +78,4 @@ def test_memo_is_dropped_when_the_map_learns_and_ignores_a_mutated_input():
     names = m.names
     got = m._evaluate(m._check(x, names), names, memo=True)
     want = _fresh(m, x, None)
-    assert torch.equal(got[0], want[0]) and torch.equal(got[1], want[1])
+    assert torch.equal(got[0], want[0]) and torch.equal(got[1].mask(), want[1].mask())

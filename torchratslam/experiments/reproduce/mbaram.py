@@ -7,7 +7,10 @@
 * ``mbaram/rawseeds-indoor``, ``mbaram/rawseeds-outdoor``: Tables 4 and 5 (nodes, QE, CR
   per dataset) and Fig. 10 (localisation with and without odometry) on simulated
   stand-ins for the Rawseeds Bicocca (indoor) and Bovisa (outdoor) sets: front and rear
-  lasers plus odometry, "dynamic" sets with pedestrians walking along the path.
+  lasers plus odometry, "dynamic" sets with pedestrians walking along the path. Each
+  finished set is saved in ``OUT/checkpoints`` (its numbers as JSON, its node places,
+  path and edges as npz); a rerun into the same OUT resumes after the sets a stopped
+  run finished.
 """
 
 from __future__ import annotations
@@ -21,7 +24,14 @@ from typing import Any
 import numpy as np
 
 from torchratslam.experiments.mbaram_tour import PRESETS, laser_frames, sim_session, split_laps
-from torchratslam.experiments.reproduce.report import Experiment, ExperimentContext, Report, Row
+from torchratslam.experiments.reproduce.checkpoints import load_part, save_part
+from torchratslam.experiments.reproduce.report import (
+    CHECKPOINTS,
+    Experiment,
+    ExperimentContext,
+    Report,
+    Row,
+)
 
 __all__ = [
     "CORRIDOR_TOUR",
@@ -350,16 +360,36 @@ def _rawseeds(exp: _Rawseeds, ctx: ExperimentContext) -> Report:
         dynamic = "Dynamic" in dataset
         frames = exp.quick_frames if ctx.quick else set_frames(nodes, cr)
         seed = 100 * ctx.seed + i + 1
+        spec = set_spec(exp, frames, ctx.quick)
         session = sim_session(
-            set_spec(exp, frames, ctx.quick),
-            laps=1,
-            seed=seed,
-            moving=exp.pedestrians if dynamic else 0,
-            moved=0,
+            spec, laps=1, seed=seed, moving=exp.pedestrians if dynamic else 0, moved=0
         )
         worlds[dataset] = session.world
         lengths[dataset] = len(session)
+        key = {
+            "experiment": exp.key,
+            "spec": spec,
+            "seed": seed,
+            "pedestrians": exp.pedestrians if dynamic else 0,
+            "settings": {name: PRESETS[p] for name, p in SETTINGS},
+        }
+        done = load_part(ctx.out, dataset, key) if ctx.resume else None
+        if done is not None:
+            for name, _ in SETTINGS:
+                r = done[0]["runs"][name]
+                a = done[1]
+                runs[name][dataset] = _Outcome(
+                    r["metrics"],
+                    a[f"{name}.node_xy"],
+                    a[f"{name}.path"],
+                    a[f"{name}.edges"],
+                    r["seconds"],
+                )
+            log.info("%s %s: finished by an earlier run (%s)", exp.key, dataset, CHECKPOINTS)
+            continue
+        t0 = time.perf_counter()
         scanned = list(laser_frames(session, 0, len(session)))  # scanned once, run twice
+        scan_s = time.perf_counter() - t0
         for name, preset in SETTINGS:
             # the paper localises on the mapping data again ("we input all three datasets
             # to the corresponding map"): an empty loc_laps replays the mapping frames
@@ -380,6 +410,35 @@ def _rawseeds(exp: _Rawseeds, ctx: ExperimentContext) -> Report:
                 o.seconds,
             )
         del scanned
+        save_part(
+            ctx.out,
+            dataset,
+            key,
+            {
+                "scans": len(session),
+                "scan_seconds": scan_s,
+                "runs": {
+                    name: {
+                        "metrics": runs[name][dataset].metrics,
+                        "seconds": runs[name][dataset].seconds,
+                    }
+                    for name, _ in SETTINGS
+                },
+            },
+            {
+                f"{name}.{field}": getattr(runs[name][dataset], field)
+                for name, _ in SETTINGS
+                for field in ("node_xy", "path", "edges")
+            },
+        )
+        log.info(
+            "%s %s: set done in %.0f s (%.0f s ray casting), saved in %s",
+            exp.key,
+            dataset,
+            time.perf_counter() - t0,
+            scan_s,
+            CHECKPOINTS,
+        )
     rows: list[Row] = []
     for dataset, nodes, qe, cr in sets:
         rec = runs["recommended"][dataset].metrics

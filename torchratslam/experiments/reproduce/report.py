@@ -20,6 +20,7 @@ from ratslam_graph.atomic import atomic_write_text
 from torchratslam.errors import InputError
 
 __all__ = [
+    "CHECKPOINTS",
     "PAPERS",
     "Experiment",
     "ExperimentContext",
@@ -28,6 +29,9 @@ __all__ = [
     "format_cell",
     "write_report",
 ]
+
+CHECKPOINTS = "checkpoints"
+"""The folder of OUT where a long experiment saves its finished parts (resumable)."""
 
 PAPERS: Mapping[str, str] = {
     "multisession": "Multi-session mapping with RatSLAM (the multisession paper)",
@@ -60,14 +64,19 @@ class ExperimentContext:
     """How an experiment is run.
 
     Attributes:
-        out: the folder for the report and the figures (exists, empty).
+        out: the folder for the report and the figures (exists; empty, or holding
+            the checkpoints of a stopped run of the same experiment).
         quick: a small version (for the tests); else the paper's size.
         seed: the random seed of simulated worlds and noise.
+        resume: an experiment that checkpoints its long parts (``OUT/checkpoints``)
+            reuses those a stopped run of the same settings finished; False
+            (``--overwrite``) redoes them.
     """
 
     out: Path
     quick: bool = False
     seed: int = 0
+    resume: bool = True
 
 
 @dataclass(frozen=True)

@@ -3,7 +3,9 @@
 ``run_one`` writes ``OUT/report.json``, ``OUT/report.md`` and the figures; ``run_all``
 runs every experiment into ``OUT/<paper>/<name>/`` and writes ``OUT/index.md`` and
 ``OUT/index.json`` (each experiment's rows, or the one-line error it stopped with).
-A folder that already holds a report is never overwritten unless asked.
+A folder that already holds a report is never overwritten unless asked; one that holds
+the checkpoints of a stopped run (``OUT/checkpoints``) is resumed, its finished parts
+kept (``--overwrite`` redoes them).
 """
 
 from __future__ import annotations
@@ -18,6 +20,7 @@ from ratslam_graph.atomic import atomic_write_text
 from torchratslam.errors import InputError, RatSLAMError
 from torchratslam.experiments.reproduce.catalogue import all_experiments, get_experiment
 from torchratslam.experiments.reproduce.report import (
+    CHECKPOINTS,
     Experiment,
     ExperimentContext,
     Report,
@@ -32,8 +35,9 @@ log = logging.getLogger(__name__)
 def _prepare(out: Path, *, overwrite: bool) -> None:
     from ratslam_graph.out_checks import check_out_dir
 
-    # new, empty, or a report of its own: a folder holding anything else is refused
-    check_out_dir(out, what="report", marks=("report.json", "index.json"))
+    # new, empty, a report of its own or the checkpoints of a stopped run (resumed):
+    # a folder holding anything else is refused
+    check_out_dir(out, what="report", marks=("report.json", "index.json", CHECKPOINTS))
     if (out / "report.json").exists() and not overwrite:
         raise InputError(f"{out} already holds a report; choose another --out or pass --overwrite")
     if out.exists() and not out.is_dir():
@@ -58,7 +62,7 @@ def run_one(
     out = Path(out)
     _prepare(out, overwrite=overwrite)
     log.info("%s: %s%s", exp.id, exp.title, " (quick)" if quick else "")
-    report = exp.run(ExperimentContext(out=out, quick=quick, seed=seed))
+    report = exp.run(ExperimentContext(out=out, quick=quick, seed=seed, resume=not overwrite))
     write_report(report, out)
     return report
 
