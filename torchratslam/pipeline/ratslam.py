@@ -23,6 +23,7 @@ from torchratslam.config import RatSLAMConfig
 from torchratslam.errors import InputError
 from torchratslam.messages import Frame, SessionState, ViewMatch
 from torchratslam.pipeline.checks import as_config, check_device, check_odometry_step
+from torchratslam.pipeline.em_stage import experience_map_step
 from torchratslam.pipeline.history import History
 from torchratslam.pipeline.results import RunResult, StepResult
 from torchratslam.pipeline.runner import RunProgress, open_frames, parked_gc
@@ -228,54 +229,18 @@ class RatSLAM:
         pc: tuple[float, float, float],
         behaviour: int | None = None,
     ) -> int:
-        em = self.experience_map
-        params = getattr(em, "params", None)
-        relax = getattr(params, "exp_relax", "every_frame")
-        extra = {} if behaviour is None else {"behaviour": int(behaviour)}
-        step = getattr(em, "step_frame", None)
-        rule = getattr(params, "exp_create_rule", "pc_distance")
-        if step is not None and rule != "activity":  # one call: odometry, action, relaxation
-            with self.timings.section("experience_map"):
-                step(
-                    None if self._skips_odometry(index) else odo,
-                    action,
-                    frame=index,
-                    t=float(frame.t),
-                    pc=pc,
-                    template_id=int(view.template_id),
-                    relax=relax == "every_frame" or action.kind != ActionKind.NONE,
-                    **extra,
-                )
-            return int(em.current_id)
         with self.timings.section("experience_map"):
-            if not self._skips_odometry(index):
-                em.on_odometry(*odo)
-                if getattr(params, "exp_create_rule", "pc_distance") == "activity":
-                    action = self._activity_action(view, action, pc)
-            em.apply(
+            return experience_map_step(
+                self.experience_map,
+                None if self._skips_odometry(index) else odo,
                 action,
                 frame=index,
                 t=float(frame.t),
                 pc=pc,
                 template_id=int(view.template_id),
-                **extra,
+                pc_dims=tuple(float(d) for d in self.config.pose_cells.dims),
+                behaviour=behaviour,
             )
-            if relax == "every_frame" or action.kind != ActionKind.NONE:
-                em.iterate()
-        return int(em.current_id)
-
-    def _activity_action(
-        self, view: ViewMatch, action: Action, pc: tuple[float, float, float]
-    ) -> Action:
-        """``exp_create_rule="activity"``: the experience map decides from experience
-        activity (Eqs. 1-4) in place of the pose cells' distance rule."""
-        p = self.config.pose_cells
-        return self.experience_map.activity_action(  # type: ignore[attr-defined]
-            pc,
-            int(view.template_id),
-            dims=tuple(float(d) for d in p.dims),
-            relative_rad=float(action.relative_rad),
-        )
 
     def _finish(
         self,

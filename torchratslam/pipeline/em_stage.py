@@ -1,0 +1,69 @@
+"""The pipeline's experience-map stage: a frame's odometry, action and relaxation.
+
+:func:`experience_map_step` is what :class:`~torchratslam.pipeline.RatSLAM` does with the
+experience map each frame: one compiled call (``step_frame``) where the module has it and
+the pose cells' action stands, else odometry, the action (the experience map's own
+under ``exp_create_rule="activity"``, Eqs. 1-4) and the relaxation, one by one.
+"""
+
+from __future__ import annotations
+
+from ratslam_graph.messages import Action, ActionKind
+from torchratslam.protocols import ExperienceMapModule
+
+__all__ = ["experience_map_step"]
+
+
+def experience_map_step(
+    em: ExperienceMapModule,
+    odo: tuple[float, float, float] | None,
+    action: Action,
+    *,
+    frame: int,
+    t: float,
+    pc: tuple[float, float, float],
+    template_id: int,
+    pc_dims: tuple[float, ...],
+    behaviour: int | None = None,
+) -> int:
+    """One frame of the experience map; returns its current experience.
+
+    Args:
+        em: the experience map.
+        odo: ``(vtrans, vrot, dt)``, or None where the frame's odometry is skipped
+            (OpenRatSLAM's first message).
+        action: the pose cells' action.
+        frame, t: the frame's index and time.
+        pc: the dominant packet's centre (cells).
+        template_id: the frame's view template.
+        pc_dims: the pose-cell network's ``(X, Y, TH)``, for the activity rule's
+            distances round the wrapping network.
+        behaviour: the transition's movement label (Eq. 9), or None.
+    """
+    params = getattr(em, "params", None)
+    relax_every = getattr(params, "exp_relax", "every_frame") == "every_frame"
+    extra = {} if behaviour is None else {"behaviour": int(behaviour)}
+    step = getattr(em, "step_frame", None)
+    activity = getattr(params, "exp_create_rule", "pc_distance") == "activity"
+    if step is not None and not activity:  # one call: odometry, action, relaxation
+        step(
+            odo,
+            action,
+            frame=frame,
+            t=t,
+            pc=pc,
+            template_id=template_id,
+            relax=relax_every or action.kind != ActionKind.NONE,
+            **extra,
+        )
+        return int(em.current_id)
+    if odo is not None:
+        em.on_odometry(*odo)
+        if activity:  # the experience map decides from experience activity (Eqs. 1-4)
+            action = em.activity_action(  # type: ignore[attr-defined]
+                pc, template_id, dims=pc_dims, relative_rad=float(action.relative_rad)
+            )
+    em.apply(action, frame=frame, t=t, pc=pc, template_id=template_id, **extra)
+    if relax_every or action.kind != ActionKind.NONE:
+        em.iterate()
+    return int(em.current_id)
