@@ -267,10 +267,11 @@ class ExperienceGraph:
                 return k
         return -1
 
-    def link_index(self, a: int, b: int) -> int:
-        """Row of the link between ``a`` and ``b`` in either direction, or -1."""
+    def link_index(self, a: int, b: int, *, directed: bool = False) -> int:
+        """Row of the link between ``a`` and ``b`` in either direction (``directed``:
+        ``a -> b`` only), or -1."""
         k = self._find(int(a), int(b))
-        return k if k >= 0 else self._find(int(b), int(a))
+        return k if k >= 0 or directed else self._find(int(b), int(a))
 
     def add_link(
         self,
@@ -283,8 +284,10 @@ class ExperienceGraph:
         *,
         behaviour: int = 0,
         counts: tuple[int, int, int] = (1, 1, 1),
+        directed: bool = False,
     ) -> bool:
-        """Add a link ``src -> dst`` unless the pair is already linked (either direction).
+        """Add a link ``src -> dst`` unless the pair is already linked (either direction;
+        ``directed``: unless ``src -> dst`` is).
 
         Args:
             src, dst: experience ids.
@@ -293,6 +296,7 @@ class ExperienceGraph:
             behaviour: movement behaviour label ``beta_ij`` of Eq. 9.
             counts: initial ``(traversals, successes, trials)`` (Eq. 9's ``n_ij`` and
                 ``n_i,beta``).
+            directed: ``exp_link_directed``.
 
         Returns:
             True if a link was added, False if the pair was already linked.
@@ -301,7 +305,7 @@ class ExperienceGraph:
         dst = self.check_id(dst, "link target")
         if src == dst:
             raise GraphError(f"cannot link experience {src} to itself")
-        if self.link_index(src, dst) >= 0:
+        if self.link_index(src, dst, directed=directed) >= 0:
             return False
         vals = (float(d), float(heading), float(facing), float(dt))
         if not all(map(math.isfinite, vals)) or vals[0] < 0:
@@ -356,18 +360,37 @@ class ExperienceGraph:
         self.out_next[: self.e] = nxt
         self._ref = None
 
-    def count_transition(self, src: int, dst: int, behaviour: int, threshold: float) -> None:
+    def count_transition(
+        self,
+        src: int,
+        dst: int,
+        behaviour: int,
+        threshold: float,
+        *,
+        directed: bool = False,
+        overlap_m: float = 0.0,
+    ) -> None:
         """Count a transition for Eq. 9 and delete links whose confidence fell too low.
 
         Every link leaving ``src`` with the same behaviour had a trial; the one to
         ``dst`` succeeded, the others failed. The link between the pair (either
-        direction) counts a traversal. Links leaving ``src`` whose confidence falls below
-        ``threshold`` (``exp_link_confidence_threshold``; 0: never) are removed.
+        direction; ``directed``: ``src -> dst``) counts a traversal. Links leaving
+        ``src`` whose confidence falls below ``threshold``
+        (``exp_link_confidence_threshold``; 0: never) are removed. With ``overlap_m``
+        > 0 (``exp_link_overlap_m``) a link to another representation of ``dst``'s
+        place (within ``overlap_m`` of it in the map, facing within 45 degrees of its
+        way) has no trial: the robot arrived where it predicted.
         """
-        k_pair = self.link_index(src, dst)
+        k_pair = self.link_index(src, dst, directed=directed)
         # the links leaving src (a node's few out-links, not the map's links)
         beh, dsts, counts = self.behaviour, self.dst, self.counts
         rows = [k for k in self.out_links(src) if beh[k] == behaviour]
+        if overlap_m > 0.0 and rows:
+            there = self.pose[dsts[rows]] - self.pose[dst]
+            same = (np.hypot(there[:, 0], there[:, 1]) <= overlap_m) & (
+                np.abs(wrap_angle(there[:, 2])) <= np.pi / 4
+            )
+            rows = [k for k, s in zip(rows, same.tolist()) if dsts[k] == dst or not s]
         for k in rows:
             counts[k, 2] += 1
             if dsts[k] == dst:

@@ -318,9 +318,7 @@ class ExperienceMap:
             t=t,
         )
         if cur >= 0:
-            self.store.count_transition(
-                cur, new, behaviour, self.params.exp_link_confidence_threshold
-            )
+            self._count(cur, new, behaviour)
             self._link_from_accumulators(cur, new, 0.0, behaviour)
         elif not first_at_origin:
             # OpenRatSLAM: its current id starts at 0, so on_set_experience(0, 0) returns
@@ -335,7 +333,14 @@ class ExperienceMap:
     ) -> bool:
         d, heading, facing = self._measurement(src, relative_rad)
         added = self.store.add_link(
-            src, dst, d, heading, facing, self.accum_time, behaviour=behaviour
+            src,
+            dst,
+            d,
+            heading,
+            facing,
+            self.accum_time,
+            behaviour=behaviour,
+            directed=self.params.exp_link_directed,
         )
         if added and self.params.exp_link_time == "per_link":
             self.accum_time = 0.0
@@ -389,10 +394,22 @@ class ExperienceMap:
 
     def _repeat_or_count(self, cur: int, dest: int, relative_rad: float, behaviour: int) -> None:
         """Bookkeeping of a transition ``cur -> dest`` between existing experiences."""
-        k = self.store.link_index(cur, dest)
+        k = self.store.link_index(cur, dest, directed=self.params.exp_link_directed)
         if k >= 0 and self.params.exp_link_averaging:
             self._average_into(k, cur, relative_rad)
-        self.store.count_transition(cur, dest, behaviour, self.params.exp_link_confidence_threshold)
+        self._count(cur, dest, behaviour)
+
+    def _count(self, cur: int, dest: int, behaviour: int) -> None:
+        """Eq. 9's count of the transition ``cur -> dest`` (the map's link settings)."""
+        p = self.params
+        self.store.count_transition(
+            cur,
+            dest,
+            behaviour,
+            p.exp_link_confidence_threshold,
+            directed=p.exp_link_directed,
+            overlap_m=p.exp_link_overlap_m,
+        )
 
     def _average_into(self, k: int, cur: int, relative_rad: float) -> None:
         """Average the accumulated transition into link ``k`` (Eq. 6)."""

@@ -56,6 +56,7 @@ def compiled_frame(em: ExperienceMap) -> bool:
         and p.exp_backend == "alpha"
         and p.exp_relax_budget == 0
         and not p.exp_link_averaging
+        and not p.exp_link_directed
         and p.exp_link_confidence_threshold <= 0.0
         and p.exp_create_rule != "activity"
         and getattr(em.backend, "schedule", None) == "openratslam"

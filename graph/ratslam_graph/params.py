@@ -174,6 +174,19 @@ class ExperienceMapParams(Params):
         ge=0.0,
         le=1.0,
     )
+    exp_link_directed: bool = param(
+        False,
+        "learn each driven transition a -> b as its own link even when b -> a exists (its "
+        "own Eq. 9 counts and Eq. 6 average); false: a pair is linked once, either way "
+        "(OpenRatSLAM)",
+    )
+    exp_link_overlap_m: float = param(
+        0.0,
+        "Eq. 9: a link whose target lies within this (m, in the map, facing within 45 "
+        "degrees) of the experience reached is not counted a failure (it predicted the "
+        "same place); 0: every other link of the behaviour fails (the paper's rule)",
+        ge=0.0,
+    )
     # OpenRatSLAM's exact behaviours and the project's alternatives, by name.
     # Defaults are OpenRatSLAM's; the ``behaviour`` profile of torchratslam.config sets
     # several of them at once (docs/openratslam-fidelity.md has each one's measured effect).

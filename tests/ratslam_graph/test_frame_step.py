@@ -99,6 +99,7 @@ def test_compiled_frame_is_the_python_path_bit_for_bit(seed, kw):
 def test_other_settings_take_the_python_path_and_give_its_map():
     for kw in (
         {"exp_link_averaging": True},
+        {"exp_link_directed": True},
         {"exp_link_confidence_threshold": 0.3},
         {"exp_relax_budget": 50},
         {"exp_backend": "alpha", "exp_relax_order": "colour"},

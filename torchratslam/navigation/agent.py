@@ -241,9 +241,16 @@ class NavigationAgent:
         d = np.hypot(*(em.poses[:, :2] - pose[:2]).T)
         turn = np.abs(wrap_angle(em.poses[:, 2] - pose[2]))
         group = np.flatnonzero((d <= self.params.overlap_m) & (turn <= np.pi / 4))
-        threshold = em.params.exp_link_confidence_threshold
+        q = em.params
         for x in group[group != cur].tolist():  # the few experiences overlapping one place
-            em.store.count_transition(x, cur, behaviour, threshold)
+            em.store.count_transition(
+                x,
+                cur,
+                behaviour,
+                q.exp_link_confidence_threshold,
+                directed=q.exp_link_directed,
+                overlap_m=q.exp_link_overlap_m,
+            )
 
     def navigate(self, goal: Goal) -> Trial:
         """Drive to ``goal`` (see the module docstring)."""

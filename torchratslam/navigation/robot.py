@@ -29,19 +29,22 @@ from torchratslam.sim.office.sim import OfficeParams, OfficeSim, OfficeStep
 __all__ = ["LinkEvents", "MappingRobot", "Tick", "count_link_events", "pair_keys"]
 
 
-def pair_keys(src: np.ndarray, dst: np.ndarray) -> np.ndarray:
-    """An undirected key per link (``min * 2**32 + max``).
+def pair_keys(src: np.ndarray, dst: np.ndarray, *, directed: bool = False) -> np.ndarray:
+    """An undirected key per link (``min * 2**32 + max``; ``directed``: ``src * 2**32 +
+    dst``, for maps that learn each way as its own link, ``exp_link_directed``).
 
     Shape:
         src, dst: (E,). Returns (E,) int64.
     """
+    if directed:
+        return src.astype(np.int64) * (1 << 32) + dst.astype(np.int64)
     a, b = np.minimum(src, dst).astype(np.int64), np.maximum(src, dst).astype(np.int64)
     return a * (1 << 32) + b
 
 
 @dataclass
 class LinkEvents:
-    """Links deleted and relearnt so far (undirected pairs as keys).
+    """Links deleted and relearnt so far (:func:`pair_keys` as keys).
 
     Attributes:
         deleted: how many link deletions happened.
@@ -154,7 +157,8 @@ class MappingRobot:
     def _count_links(self) -> None:
         store = self.slam.experience_map.store  # type: ignore[attr-defined]
         e = store.e
-        keys = pair_keys(store.src[:e], store.dst[:e])
+        directed = self.slam.experience_map.params.exp_link_directed  # type: ignore[attr-defined]
+        keys = pair_keys(store.src[:e], store.dst[:e], directed=directed)
         count_link_events(self.links, self._keys, keys)
         self._keys = keys
 
