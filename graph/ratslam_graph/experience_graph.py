@@ -360,52 +360,6 @@ class ExperienceGraph:
         self.out_next[: self.e] = nxt
         self._ref = None
 
-    def count_transition(
-        self,
-        src: int,
-        dst: int,
-        behaviour: int,
-        threshold: float,
-        *,
-        directed: bool = False,
-        overlap_m: float = 0.0,
-    ) -> None:
-        """Count a transition for Eq. 9 and delete links whose confidence fell too low.
-
-        Every link leaving ``src`` with the same behaviour had a trial; the one to
-        ``dst`` succeeded, the others failed. The link between the pair (either
-        direction; ``directed``: ``src -> dst``) counts a traversal. Links leaving
-        ``src`` whose confidence falls below ``threshold``
-        (``exp_link_confidence_threshold``; 0: never) are removed. With ``overlap_m``
-        > 0 (``exp_link_overlap_m``) a link to another representation of ``dst``'s
-        place (within ``overlap_m`` of it in the map, facing within 45 degrees of its
-        way) has no trial: the robot arrived where it predicted.
-        """
-        k_pair = self.link_index(src, dst, directed=directed)
-        # the links leaving src (a node's few out-links, not the map's links)
-        beh, dsts, counts = self.behaviour, self.dst, self.counts
-        rows = [k for k in self.out_links(src) if beh[k] == behaviour]
-        if overlap_m > 0.0 and rows:
-            there = self.pose[dsts[rows]] - self.pose[dst]
-            same = (np.hypot(there[:, 0], there[:, 1]) <= overlap_m) & (
-                np.abs(wrap_angle(there[:, 2])) <= np.pi / 4
-            )
-            rows = [k for k, s in zip(rows, same.tolist()) if dsts[k] == dst or not s]
-        for k in rows:
-            counts[k, 2] += 1
-            if dsts[k] == dst:
-                counts[k, 1] += 1
-        if k_pair >= 0:
-            counts[k_pair, 0] += 1
-            self.edge_dirty[k_pair] = 1
-        self.edge_dirty[rows] = 1
-        if threshold > 0.0 and rows:
-            sel = np.array(rows, dtype=np.int64)
-            conf = link_confidence(self.counts[sel, 1], self.counts[sel, 2])
-            doomed = [(src, int(v)) for v in self.dst[sel[conf < threshold]]]
-            for a, b in doomed:
-                self.remove_link(a, b)
-
     def posegraph(self, order: str = "creation") -> PoseGraph:
         """The map as a :class:`~ratslam_graph.posegraph.PoseGraph`.
 

@@ -44,11 +44,10 @@ from typing import Any
 import networkx as nx
 import numpy as np
 
-from ratslam_graph import queries, relaxation
+from ratslam_graph import link_learning, queries, relaxation
 from ratslam_graph.errors import GraphError
 from ratslam_graph.experience_graph import ExperienceGraph
-from ratslam_graph.features import average_transition
-from ratslam_graph.geometry import inverse, wrap_angle
+from ratslam_graph.geometry import wrap_angle
 from ratslam_graph.map_state import map_state, read_map_state
 from ratslam_graph.messages import Action, ActionKind
 from ratslam_graph.params import ExperienceMapParams
@@ -318,7 +317,7 @@ class ExperienceMap:
             t=t,
         )
         if cur >= 0:
-            self._count(cur, new, behaviour)
+            link_learning.count_transition(self.store, self.params, cur, new, behaviour)
             self._link_from_accumulators(cur, new, 0.0, behaviour)
         elif not first_at_origin:
             # OpenRatSLAM: its current id starts at 0, so on_set_experience(0, 0) returns
@@ -394,36 +393,14 @@ class ExperienceMap:
 
     def _repeat_or_count(self, cur: int, dest: int, relative_rad: float, behaviour: int) -> None:
         """Bookkeeping of a transition ``cur -> dest`` between existing experiences."""
-        k = self.store.link_index(cur, dest, directed=self.params.exp_link_directed)
-        if k >= 0 and self.params.exp_link_averaging:
-            self._average_into(k, cur, relative_rad)
-        self._count(cur, dest, behaviour)
-
-    def _count(self, cur: int, dest: int, behaviour: int) -> None:
-        """Eq. 9's count of the transition ``cur -> dest`` (the map's link settings)."""
         p = self.params
-        self.store.count_transition(
-            cur,
-            dest,
-            behaviour,
-            p.exp_link_confidence_threshold,
-            directed=p.exp_link_directed,
-            overlap_m=p.exp_link_overlap_m,
-        )
-
-    def _average_into(self, k: int, cur: int, relative_rad: float) -> None:
-        """Average the accumulated transition into link ``k`` (Eq. 6)."""
-        d, heading, facing = self._measurement(cur, relative_rad)
-        meas = np.array([d * math.cos(heading), d * math.sin(heading), facing])
-        if int(self.store.src[k]) != cur:  # the link runs the other way: express it from its source
-            meas = inverse(meas, include_pi=True)
-        new = average_transition(self.store.meas[k], meas)
-        dt = 0.5 * (float(self.store.link[k, 3]) + self.accum_time)
-        self.store.set_link(
-            k, math.hypot(new[0], new[1]), math.atan2(new[1], new[0]), float(new[2]), dt
-        )
-        if self.params.exp_link_time == "per_link":
-            self.accum_time = 0.0
+        k = self.store.link_index(cur, dest, directed=p.exp_link_directed)
+        if k >= 0 and p.exp_link_averaging:
+            m = self._measurement(cur, relative_rad)
+            link_learning.average_into(self.store, k, cur, m, self.accum_time)
+            if p.exp_link_time == "per_link":
+                self.accum_time = 0.0
+        link_learning.count_transition(self.store, p, cur, dest, behaviour)
 
     def activity_action(
         self,

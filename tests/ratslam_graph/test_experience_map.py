@@ -18,6 +18,7 @@ import pytest
 from ratslam_graph.errors import GraphError, InputError, MapFormatError
 from ratslam_graph.experience_graph import ExperienceGraph
 from ratslam_graph.experience_map import ExperienceMap
+from ratslam_graph.link_learning import count_transition
 from ratslam_graph.messages import Action, ActionKind
 from ratslam_graph.params import ExperienceMapParams
 
@@ -865,7 +866,7 @@ def test_graph_built_when_read_equals_one_read_after_every_change():
             s, d = int(eager.src[0]), int(eager.dst[0])
             for g in (eager, lazy):
                 g.remove_link(s, d)
-                g.count_transition(a, b, step % 2, 0.0)
+                count_transition(g, ExperienceMapParams(), a, b, step % 2)
         eager.graph  # noqa: B018 - read after every change
     assert list(lazy.graph.nodes(data=True)) == list(eager.graph.nodes(data=True))
     assert list(lazy.graph.edges(data=True)) == list(eager.graph.edges(data=True))

@@ -9,6 +9,10 @@ import pytest
 
 from ratslam_graph.experience_graph import ExperienceGraph
 from ratslam_graph.features import link_confidence
+from ratslam_graph.link_learning import count_transition
+from ratslam_graph.params import ExperienceMapParams
+
+PARAMS = ExperienceMapParams()  # Eq. 9 counted, nothing deleted
 
 
 def _built_from_scratch(s: ExperienceGraph) -> nx.DiGraph:
@@ -78,7 +82,7 @@ def test_the_view_read_at_random_moments_equals_the_arrays(seed: int) -> None:
             s.remove_link(int(s.src[k]), int(s.dst[k]))
         elif op == 4 and s.e:
             k = int(rng.integers(s.e))
-            s.count_transition(int(s.src[k]), int(s.dst[k]), int(s.behaviour[k]), 0.0)
+            count_transition(s, PARAMS, int(s.src[k]), int(s.dst[k]), int(s.behaviour[k]))
         else:
             s.pose[: s.n] += rng.normal(scale=0.1, size=(s.n, 3))
             s.poses_changed()

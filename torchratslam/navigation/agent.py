@@ -31,6 +31,7 @@ from ratslam_graph.errors import InputError
 from ratslam_graph.experience_map import ExperienceMap
 from ratslam_graph.features import Route
 from ratslam_graph.geometry import wrap_angle
+from ratslam_graph.link_learning import count_transition
 from ratslam_graph.navigation.recovery import (
     RecoveryMode,
     RecoveryParams,
@@ -241,16 +242,8 @@ class NavigationAgent:
         d = np.hypot(*(em.poses[:, :2] - pose[:2]).T)
         turn = np.abs(wrap_angle(em.poses[:, 2] - pose[2]))
         group = np.flatnonzero((d <= self.params.overlap_m) & (turn <= np.pi / 4))
-        q = em.params
         for x in group[group != cur].tolist():  # the few experiences overlapping one place
-            em.store.count_transition(
-                x,
-                cur,
-                behaviour,
-                q.exp_link_confidence_threshold,
-                directed=q.exp_link_directed,
-                overlap_m=q.exp_link_overlap_m,
-            )
+            count_transition(em.store, em.params, x, cur, behaviour)
 
     def navigate(self, goal: Goal) -> Trial:
         """Drive to ``goal`` (see the module docstring)."""
