@@ -423,40 +423,21 @@ class MultiSessionRatSLAM:
         if place is not None:
             partial = _with_place(partial, place)
         loaded = self.stored[k]
-        rel = float(self._banks[k].relative_rad(offset))
         res = merge_maps(
             loaded,
             partial,
             loaded_template,
-            relative_rad=rel,
+            relative_rad=float(self._banks[k].relative_rad(offset)),
             shift_pose_cells=self.shift_pose_cells,
             **self.merge_options,
         )
-        absorbed: list[tuple[int, int]] = []
-        state, exp_ids = res.state, res.info["exp_ids"]
-        if absorb:
-            tmap = res.info["template_ids"]
-            pairs = [(int(tmap[p]), int(t)) for p, t in absorb if 0 <= p < tmap.size]
-            if place is not None:
-                state = _remeasured(state, pairs)
-            state, fmap, absorbed = fuse_templates(state, pairs)
-            exp_ids = fmap[np.asarray(exp_ids, np.int64)]
+        state, exp_ids, absorbed = _absorbed(res, absorb or [], remeasure=place is not None)
         apply_state(state, self.slam, exp_ids=exp_ids)
         self.slam.experience_map.iterate()
         self.pending.remove(k)
         if self.keep_snapshots:
-            relaxed = self.slam.experience_map.poses
-            self.snapshots.append(
-                {
-                    "loaded": loaded.exp_pose.copy(),
-                    "partial": partial.exp_pose.copy(),
-                    "merged": state.exp_pose.copy(),
-                    "relaxed": np.asarray(relaxed, np.float64).copy(),
-                    "n_loaded": np.array(loaded.n_experiences),
-                    "merged_state": state,
-                    "partial_state": partial,
-                }
-            )
+            relaxed = np.asarray(self.slam.experience_map.poses, np.float64)
+            self.snapshots.append(_snapshot(loaded, partial, state, relaxed))
         rec = _merge_record(res.info, loaded, partial, state, absorbed)
         if not np.isfinite(rec["partial_exp_t"]):  # a first view: the robot is where it is
             rec["partial_exp_t"] = float(self.slam.session.last_t)
@@ -489,6 +470,38 @@ class MultiSessionRatSLAM:
     def unmerged(self) -> list[MapState]:
         """The stored maps that were not merged (still separate)."""
         return [self.stored[k] for k in self.pending]
+
+
+def _absorbed(
+    res: Any, absorb: list[tuple[int, int]], *, remeasure: bool
+) -> tuple[MapState, np.ndarray, list[tuple[int, int]]]:
+    """The merged state with the ``absorb`` pairs (partial template, stored template)
+    fused (:func:`~torchratslam.maps.merge.fuse_templates`; ``remeasure``: their links
+    measured anew first), its experience ids and the pairs fused."""
+    state, exp_ids = res.state, res.info["exp_ids"]
+    if not absorb:
+        return state, exp_ids, []
+    tmap = res.info["template_ids"]
+    pairs = [(int(tmap[p]), int(t)) for p, t in absorb if 0 <= p < tmap.size]
+    if remeasure:
+        state = _remeasured(state, pairs)
+    state, fmap, absorbed = fuse_templates(state, pairs)
+    return state, fmap[np.asarray(exp_ids, np.int64)], absorbed
+
+
+def _snapshot(
+    loaded: MapState, partial: MapState, state: MapState, relaxed: np.ndarray
+) -> dict[str, Any]:
+    """A merge's snapshot (:attr:`MultiSessionRatSLAM.snapshots`)."""
+    return {
+        "loaded": loaded.exp_pose.copy(),
+        "partial": partial.exp_pose.copy(),
+        "merged": state.exp_pose.copy(),
+        "relaxed": relaxed.copy(),
+        "n_loaded": np.array(loaded.n_experiences),
+        "merged_state": state,
+        "partial_state": partial,
+    }
 
 
 def _best_passed(
