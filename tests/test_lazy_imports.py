@@ -119,3 +119,10 @@ g = slam.experience_map.graph
 assert g.number_of_nodes() == len(slam.experience_map) > 0
 """
     assert _loaded_after(code, tmp_path, ("networkx",)) == {"networkx"}
+
+
+def test_the_cli_parser_loads_no_plotting_image_or_tensor_library(tmp_path):
+    """``torchratslam --help`` (every subcommand registered) imports neither cv2 (the
+    simulator writes frames with it when it writes them) nor torch nor matplotlib."""
+    code = "import torchratslam.cli\ntorchratslam.cli.build_parser()\n"
+    assert _loaded_after(code, tmp_path, PLOTTING + HEAVY + ("networkx",)) == set()
