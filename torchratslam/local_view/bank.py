@@ -75,9 +75,10 @@ class TemplateBank(nn.Module):
         """A zero buffer of ``capacity`` rows. On the CPU its memory comes from the
         operating system's zeroed pages (numpy's ``calloc``), so the rows not yet written
         cost no memory (``torch.zeros`` writes every row)."""
-        if self.device is None or self.device.type == "cpu":
+        probe = torch.empty(0, dtype=self.dtype, device=self.device)  # the default device too
+        if probe.device.type == "cpu":
             try:
-                np_dtype = torch.empty(0, dtype=self.dtype).numpy().dtype
+                np_dtype = probe.numpy().dtype
             except (TypeError, RuntimeError):  # a dtype numpy does not have
                 pass
             else:
