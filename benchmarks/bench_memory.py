@@ -24,18 +24,39 @@ from pathlib import Path
 STEPS = (
     ("python", "pass"),
     ("numpy", "import numpy"),
+    ("yaml", "import yaml"),
     ("torch", "import torch"),
     ("numba", "import numba"),
+    (
+        "numba's implementations",
+        "from numba.core.registry import cpu_target; cpu_target.target_context.refresh()",
+    ),
     ("cv2", "import cv2"),
     ("matplotlib.pyplot", "import matplotlib; matplotlib.use('Agg'); import matplotlib.pyplot"),
     ("networkx", "import networkx"),
+    ("gtsam", "try:\n    import gtsam\nexcept ImportError:\n    pass"),
     ("torchratslam", "import torchratslam"),
     ("torchratslam.pipeline", "from torchratslam.pipeline import RatSLAM"),
     ("torchratslam.cli", "import torchratslam.cli"),
 )
-"""(label, statement) imported one after the other."""
+"""(label, statement) imported one after the other. "numba's implementations" is what
+loading the first compiled kernel adds to ``import numba`` (numba's typing and lowering
+registries, which import ``scipy.linalg`` for its BLAS); gtsam is loaded by the gtsam
+backends only, networkx when a map's graph is read, matplotlib when a figure is
+written, cv2 by the image readers."""
 
-HEAVY = ("torch", "numba", "cv2", "matplotlib", "matplotlib.pyplot", "networkx", "scipy", "PIL")
+HEAVY = (
+    "torch",
+    "numba",
+    "cv2",
+    "matplotlib",
+    "matplotlib.pyplot",
+    "networkx",
+    "gtsam",
+    "scipy",
+    "scipy.linalg",
+    "PIL",
+)
 
 _PROBE = """
 import json, sys

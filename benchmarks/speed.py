@@ -241,6 +241,7 @@ def suburb_side_by_side(build: Path, frames: int, root: Path) -> dict[str, Any]:
         "runs": runs,
         "images_mb": images_mb,
         "fixed_mb": _fixed_memory(data, root),
+        "fixed_parts": _fixed_parts(data),
     }
 
 
@@ -254,6 +255,21 @@ def _fixed_memory(data: Path, root: Path) -> float:
     cmd += ["--max-frames", "3", "--set", "behaviour=openratslam"]
     out.mkdir(parents=True, exist_ok=True)
     return bench_scale.run_peak(cmd, out / "stdout.log")[1]
+
+
+def _fixed_parts(data: Path) -> list[tuple[str, float]]:
+    """The 3-frame run's peak after each of its parts, in one fresh process
+    (:func:`benchmarks.bench_memory.measure`): set up (torch, the readers), mapped
+    (numba and the compiled kernels the frames load), figures written."""
+    from benchmarks import bench_memory
+
+    rows = bench_memory.measure(bench_memory.STEPS[:1], data, 3)["rows"]
+    keep = {
+        "run: set up": "when set up (Python, torch, the reader)",
+        "run: 3 frames mapped": "after 3 frames (+ numba and its kernels)",
+        "run: figures written": "after the figures (+ matplotlib)",
+    }
+    return [(keep[label], mb) for label, mb in rows if label in keep]
 
 
 def _py_module_means(out: Path) -> dict[str, float]:
@@ -362,7 +378,9 @@ def print_loops(results: list[dict[str, Any]]) -> None:
     print()
 
 
-def print_suburb(res: dict[str, Any]) -> None:
+def print_suburb(
+    res: dict[str, Any], imports: list[tuple[str, float, float]] | None = None
+) -> None:
     from torchratslam.eval.scale import format_scale_table
 
     runs = res["runs"]
@@ -390,19 +408,46 @@ def print_suburb(res: dict[str, Any]) -> None:
         f"({res['images_mb']:.0f} MiB of images); torchratslam reads frames as it goes. "
         f"torchratslam's figures include its odometry source and the run's outputs.\n"
     )
-    fixed = res.get("fixed_mb")
-    default = runs.get("torchratslam (default)")
-    if fixed is not None and default is not None:
-        own = default["report"]["peak_memory_mb"] - fixed
-        cpp_peak = f"{cpp['report']['peak_memory_mb']:.0f} MiB" if cpp else "not measured"
-        print(
-            f"Memory: the same command on 3 frames peaks at {fixed:.0f} MiB (the interpreter, "
-            f"torch, numba and the compiled kernels it loads, the figures): what importing "
-            f"and loading the package costs. Above it, the {res['frames']}-frame run's own "
-            f"memory is {own:.0f} MiB; the C++'s whole peak: {cpp_peak}.\n"
-        )
+    print_memory(res, imports or [])
     for label, r in runs.items():
         print(format_scale_table(r["report"], title=label) + "\n")
+
+
+def memory_rows(
+    res: dict[str, Any], imports: list[tuple[str, float, float]]
+) -> list[tuple[str, float]]:
+    """(what, peak MiB) of the suburb's memory table: each system's whole run, the C++'s
+    peak plus what importing torch alone peaks at, the run command on 3 frames (the fixed
+    cost) and its parts (``fixed_parts``: the peak after setting up, after the first
+    frames, after the figures)."""
+    rows: list[tuple[str, float]] = []
+    runs = res["runs"]
+    cpp = runs.get("OpenRatSLAM C++")
+    torch_mb = dict((label, mb) for label, _, mb in imports).get("import torch")
+    for label, r in runs.items():
+        rows.append((f"{label}, {res['frames']} frames", float(r["report"]["peak_memory_mb"])))
+    if torch_mb is not None:
+        rows.append(("`import torch` alone (Python, numpy, torch)", float(torch_mb)))
+        if cpp is not None:
+            rows.append(
+                ("the C++'s peak + torch's import", cpp["report"]["peak_memory_mb"] + torch_mb)
+            )
+    if res.get("fixed_mb") is not None:
+        rows.append(
+            ("torchratslam's run command on 3 frames (the fixed cost)", float(res["fixed_mb"]))
+        )
+    for label, mb in res.get("fixed_parts", []):
+        rows.append((f"  of which, peak {label}", float(mb)))
+    return rows
+
+
+def print_memory(res: dict[str, Any], imports: list[tuple[str, float, float]]) -> None:
+    print("### Memory on the suburb (peak RSS, one fresh process each)\n")
+    print("| what | peak MiB |")
+    print("|---|---|")
+    for label, mb in memory_rows(res, imports):
+        print(f"| {label} | {mb:.0f} |")
+    print()
 
 
 def print_imports(rows: list[tuple[str, float, float]]) -> None:
@@ -441,10 +486,11 @@ def main(
         loops.append(loop_side_by_side(build, ds, p.out, p.rounds))
     if loops:
         print_loops(loops)
+    imports = import_cost()
     if p.suburb_frames:
         print(f"[speed] suburb, {p.suburb_frames} frames", file=sys.stderr, flush=True)
-        print_suburb(suburb_side_by_side(build, p.suburb_frames, p.out))
-    print_imports(import_cost())
+        print_suburb(suburb_side_by_side(build, p.suburb_frames, p.out), imports)
+    print_imports(imports)
     print("[speed] sweep, grouped against separate runs", file=sys.stderr, flush=True)
     from benchmarks import bench_sweep
 

@@ -102,3 +102,27 @@ for _ in range(3):
 assert slam.frame_index == 3, slam.frame_index
 """
     assert _loaded_after(code, tmp_path, PLOTTING) == set()
+
+
+def test_a_run_in_memory_loads_networkx_only_when_its_graph_is_read(tmp_path):
+    code = """
+import sys
+import numpy as np
+from torchratslam import RatSLAM, load_config
+
+slam = RatSLAM(load_config("irat"))
+rng = np.random.default_rng(0)
+for _ in range(3):
+    slam.step(rng.integers(0, 255, (120, 160), dtype=np.uint8), (0.1, 0.01, 0.1))
+assert "networkx" not in sys.modules, "networkx loaded by a run that never read its graph"
+g = slam.experience_map.graph
+assert g.number_of_nodes() == len(slam.experience_map) > 0
+"""
+    assert _loaded_after(code, tmp_path, ("networkx",)) == {"networkx"}
+
+
+def test_the_cli_parser_loads_no_plotting_image_or_tensor_library(tmp_path):
+    """``torchratslam --help`` (every subcommand registered) imports neither cv2 (the
+    simulator writes frames with it when it writes them) nor torch nor matplotlib."""
+    code = "import torchratslam.cli\ntorchratslam.cli.build_parser()\n"
+    assert _loaded_after(code, tmp_path, PLOTTING + HEAVY + ("networkx",)) == set()

@@ -14,6 +14,8 @@ Example:
 
 from __future__ import annotations
 
+import inspect
+import typing
 from collections.abc import Callable, Iterator
 from typing import Any, Generic, TypeVar
 
@@ -42,6 +44,27 @@ def _interface(protocol: type) -> list[str]:
         names.update(n for n in vars(cls) if not n.startswith("_") or n in ("__len__", "__call__"))
         names.update(getattr(cls, "__annotations__", {}))
     return sorted(names)
+
+
+_MISSING = object()
+
+
+def _has_members(obj: Any, protocol: type) -> bool:
+    """Whether ``obj`` has every member of ``protocol``, looked up as Python 3.12's
+    ``isinstance`` does (:func:`inspect.getattr_static`): no property is evaluated (3.11's
+    ``hasattr`` would, and an experience map's networkx graph would be built, and networkx
+    imported, by the check). False when it cannot tell (then ``isinstance`` decides)."""
+    attrs = getattr(protocol, "__protocol_attrs__", None)
+    if attrs is None:
+        get = getattr(typing, "_get_protocol_attrs", None)
+        if get is None:
+            return False
+        attrs = get(protocol)
+    for name in attrs:
+        found = inspect.getattr_static(obj, name, _MISSING)
+        if found is _MISSING or (found is None and callable(getattr(protocol, name, None))):
+            return False
+    return True
 
 
 class Registry(Generic[P]):
@@ -105,7 +128,11 @@ class Registry(Generic[P]):
         Raises:
             ConfigError: naming the members it lacks.
         """
-        if self.protocol is not None and not isinstance(obj, self.protocol):
+        if (
+            self.protocol is not None
+            and not _has_members(obj, self.protocol)
+            and not isinstance(obj, self.protocol)
+        ):
             missing = [m for m in _interface(self.protocol) if not hasattr(obj, m)]
             article = "an" if self.kind[0] in "aeiou" else "a"
             raise ConfigError(

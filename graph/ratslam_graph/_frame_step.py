@@ -26,8 +26,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
 
+from ratslam_graph._jit import njit_cached
 from ratslam_graph.backends._sweep import insert_link, sweep
 
 PI = math.pi
@@ -47,13 +47,13 @@ FALLBACK = -1
 anything but the odometry changed: the caller runs the Python path for the action."""
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit_cached(nogil=True, inline="always")
 def wrap_pi(a: float) -> float:  # pragma: no cover - compiled
     """``wrap_angle(a, include_pi=True)`` on a float: ``pi - (pi - a) % 2pi``."""
     return PI - (PI - a) % TWO_PI
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit_cached(nogil=True, inline="always")
 def _two_square(x: float) -> tuple[float, float]:  # pragma: no cover - compiled
     """``x * x`` and its exact rounding error (Dekker's product, no fused multiply-add)."""
     z = x * x
@@ -63,7 +63,7 @@ def _two_square(x: float) -> tuple[float, float]:  # pragma: no cover - compiled
     return z, ((hi * hi - z) + 2.0 * (hi * lo)) + lo * lo
 
 
-@njit(cache=True, nogil=True)
+@njit_cached(nogil=True)
 def py_hypot(x: float, y: float) -> float:  # pragma: no cover - compiled
     """:func:`math.hypot` of two finite floats as CPython computes it (``vector_norm``:
     scaled, squared without error, compensated sum, one correction of the root)."""
@@ -101,7 +101,7 @@ def py_hypot(x: float, y: float) -> float:  # pragma: no cover - compiled
     return h / scale
 
 
-@njit(cache=True, nogil=True)
+@njit_cached(nogil=True)
 def find_link(out_ends: np.ndarray, out_next: np.ndarray, dst: np.ndarray, a: int, b: int) -> int:
     # pragma: no cover - compiled
     """Row of the link ``a -> b`` (that direction), or -1."""
@@ -113,7 +113,7 @@ def find_link(out_ends: np.ndarray, out_next: np.ndarray, dst: np.ndarray, a: in
     return -1
 
 
-@njit(cache=True, nogil=True)
+@njit_cached(nogil=True)
 def count_transition(
     counts: np.ndarray,
     behaviour: np.ndarray,
@@ -142,7 +142,7 @@ def count_transition(
         edge_dirty[kp] = 1
 
 
-@njit(cache=True, nogil=True)
+@njit_cached(nogil=True)
 def frame_step(
     fs: np.ndarray,
     ist: np.ndarray,

@@ -22,9 +22,8 @@ Example:
 from __future__ import annotations
 
 import math
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-import networkx as nx
 import numpy as np
 
 from ratslam_graph import relaxation
@@ -34,6 +33,9 @@ from ratslam_graph.geometry import wrap_angle
 from ratslam_graph.graph_mirror import GraphMirror
 from ratslam_graph.posegraph import PoseGraph
 from ratslam_graph.queries import MapView
+
+if TYPE_CHECKING:
+    import networkx as nx
 
 __all__ = ["ExperienceGraph"]
 

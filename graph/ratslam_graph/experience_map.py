@@ -39,9 +39,8 @@ from __future__ import annotations
 
 import logging
 import math
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-import networkx as nx
 import numpy as np
 
 from ratslam_graph import link_learning, queries, relaxation
@@ -54,6 +53,9 @@ from ratslam_graph.params import ExperienceMapParams
 from ratslam_graph.posegraph import PoseGraph
 from ratslam_graph.protocols import RelaxationBackend
 from ratslam_graph.queries import MapView
+
+if TYPE_CHECKING:
+    import networkx as nx
 
 __all__ = ["ExperienceMap"]
 

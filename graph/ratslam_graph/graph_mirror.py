@@ -18,12 +18,14 @@ Example:
 
 from __future__ import annotations
 
-from typing import Any, Protocol
+from typing import TYPE_CHECKING, Any, Protocol
 
-import networkx as nx
 import numpy as np
 
 from ratslam_graph.features import link_confidence
+
+if TYPE_CHECKING:
+    import networkx as nx
 
 __all__ = ["GraphMirror", "MirroredArrays"]
 
@@ -83,7 +85,8 @@ class GraphMirror:
 
     The owner says what changed (:attr:`pending_edges`, :attr:`dirty_nodes`,
     :attr:`poses_dirty`, and its own ``edge_dirty`` array for link attributes);
-    :meth:`read` applies it.
+    :meth:`read` applies it. networkx is imported, and the graph made, when the graph is
+    first needed: a run that never reads it never loads networkx.
 
     Attributes:
         pending_edges: links made since the last read, in order ``(src, dst)``.
@@ -96,10 +99,19 @@ class GraphMirror:
 
     def clear(self) -> None:
         """An empty graph, nothing pending."""
-        self._g = nx.DiGraph()
+        self._made: nx.DiGraph | None = None
         self.pending_edges: list[tuple[int, int]] = []
         self.dirty_nodes: set[int] = set()
         self.poses_dirty = False
+
+    @property
+    def _g(self) -> nx.DiGraph:
+        """The graph (made empty when first needed)."""
+        if self._made is None:
+            import networkx as nx
+
+            self._made = nx.DiGraph()
+        return self._made
 
     def read(self, s: MirroredArrays) -> nx.DiGraph:
         """The graph, brought up to date with ``s``'s arrays."""
@@ -112,6 +124,8 @@ class GraphMirror:
         if s.edge_dirty[: s.e].any():
             self.flush_edges(s)
         if self.poses_dirty:
+            import networkx as nx
+
             p = s.pose[: s.n].tolist()
             nx.set_node_attributes(
                 self._g, {i: {"x": x, "y": y, "th": th} for i, (x, y, th) in enumerate(p)}

@@ -20,14 +20,17 @@ from __future__ import annotations
 
 import itertools
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
-import networkx as nx
 import numpy as np
 
 from ratslam_graph import features
 from ratslam_graph.errors import GraphError, InputError
 from ratslam_graph.features import Route
 from ratslam_graph.messages import Action, ActionKind
+
+if TYPE_CHECKING:
+    import networkx as nx
 
 __all__ = [
     "MapView",
@@ -186,6 +189,8 @@ def link_components(view: MapView, frame: str = "local") -> np.ndarray:
 
 
 def _undirected(view: MapView) -> nx.Graph:
+    import networkx as nx  # only the Dijkstra queries need it
+
     g = nx.Graph()
     g.add_nodes_from(range(len(view.poses)))
     # one link per pair: no parallel links to resolve
@@ -214,6 +219,8 @@ def temporal_map(
         return features.temporal_map(n, edges, view.link[:, 3], start)
     if method != "dijkstra":
         raise InputError(f"method must be 'dijkstra' or 'iterate', got {method!r}")
+    import networkx as nx
+
     dist = nx.single_source_dijkstra_path_length(_undirected(view), start, weight="weight")
     out = np.full(n, np.inf)
     out[np.fromiter(dist.keys(), dtype=np.int64)] = np.fromiter(dist.values(), dtype=np.float64)
@@ -231,6 +238,8 @@ def route(view: MapView, goal: int, start: int | None = None) -> Route:
     """
     start = view.check_id(start, "route start")
     goal = view.check_id(goal, "route goal")
+    import networkx as nx
+
     g = _undirected(view)
     try:
         _, path = nx.single_source_dijkstra(g, start, goal, weight="weight")

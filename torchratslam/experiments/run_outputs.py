@@ -188,6 +188,12 @@ def _csv_text(header: list[str], rows: np.ndarray, int_cols: tuple[int, ...]) ->
 
 
 def _created_frames(em: Any, n: int) -> np.ndarray:
+    """Each experience's creation frame: from the map's arrays where it keeps them (no
+    networkx graph built for it), else from its graph (-1 where a node has none)."""
+    store = getattr(em, "store", None)
+    frame = getattr(store, "frame", None)
+    if isinstance(frame, np.ndarray) and getattr(store, "n", None) == n:
+        return frame[:n].astype(np.int64)
     g = em.graph
     return np.asarray([int(g.nodes[i].get("frame", -1)) for i in range(n)], dtype=np.int64)
 

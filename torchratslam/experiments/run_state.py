@@ -222,7 +222,7 @@ def save_run_state(slam: Any, out: Path, record: RunRecord, info: dict[str, Any]
         info["multisession"] = ms
     Manifest(out).add([STATE_DIR, RUN_RECORD])  # recorded before they are written
     save_map(
-        state_from_slam(slam),
+        state_from_slam(slam, share=True),  # written now: the templates are not copied
         out / STATE_DIR,
         info=info,
         extra_files={HISTORY: _history_writer(slam)},

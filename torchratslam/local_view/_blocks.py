@@ -7,10 +7,11 @@ bit. Compiled functions are cached on disk by numba (``cache=True``).
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+
+from ratslam_graph._jit import njit_cached
 
 
-@njit(cache=True, nogil=True)
+@njit_cached(nogil=True)
 def block_means(  # pragma: no cover - compiled
     img: np.ndarray, y0: int, x0: int, ty: int, by: int, tx: int, bx: int, scale: float
 ) -> np.ndarray:

@@ -18,10 +18,11 @@ fresh environment compiles them (a few seconds).
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+
+from ratslam_graph._jit import njit_cached
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit_cached(nogil=True, inline="always")
 def early_sad(  # pragma: no cover - compiled
     data: np.ndarray,
     t: int,
@@ -63,7 +64,7 @@ def early_sad(  # pragma: no cover - compiled
 _BOUND_MATH = {"reassoc", "nsz", "contract"}
 
 
-@njit(cache=True, nogil=True, fastmath=_BOUND_MATH)
+@njit_cached(nogil=True, fastmath=_BOUND_MATH)
 def search_normal(  # pragma: no cover - compiled
     data: np.ndarray,
     cols: np.ndarray,
@@ -172,7 +173,7 @@ def search_normal(  # pragma: no cover - compiled
     return out_t, out_k, out_s, m, best, pruned
 
 
-@njit(cache=True, nogil=True, fastmath=_BOUND_MATH)
+@njit_cached(nogil=True, fastmath=_BOUND_MATH)
 def search_panoramic(  # pragma: no cover - compiled
     data: np.ndarray,
     gsort: np.ndarray,
@@ -306,7 +307,7 @@ def search_panoramic(  # pragma: no cover - compiled
     return out_t, out_k, out_s, m, best, pruned
 
 
-@njit(cache=True, nogil=True)
+@njit_cached(nogil=True)
 def _group_sums(
     t: np.ndarray, m: int, group_of_row: np.ndarray, g: int
 ) -> np.ndarray:  # pragma: no cover - compiled
@@ -320,7 +321,7 @@ def _group_sums(
     return gs
 
 
-@njit(cache=True, nogil=True)
+@njit_cached(nogil=True)
 def summaries_panoramic(  # pragma: no cover - compiled
     t: np.ndarray,
     group_of_row: np.ndarray,
@@ -349,7 +350,7 @@ def summaries_panoramic(  # pragma: no cover - compiled
         pool[m] = pl
 
 
-@njit(cache=True, nogil=True)
+@njit_cached(nogil=True)
 def summaries_normal(  # pragma: no cover - compiled
     t: np.ndarray,
     group_of_row: np.ndarray,

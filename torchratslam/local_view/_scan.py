@@ -13,14 +13,15 @@ against its newest-first search.
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+
+from ratslam_graph._jit import njit_cached
 
 # OpenRatSLAM's compare(): templates whose mean differs by more than the threshold plus
 # this are not compared
 MEAN_EPSILON = 0.005
 
 
-@njit(cache=True, nogil=True)
+@njit_cached(nogil=True)
 def linear_scan(  # pragma: no cover - compiled
     data: np.ndarray,
     means: np.ndarray,

@@ -71,13 +71,29 @@ class TemplateBank(nn.Module):
     def _shapes(self) -> dict[str, tuple[int, ...]]:
         return {"data": (self.y_size, self.x_size), "means": (), **self._summary_shapes}
 
+    def _zeros(self, capacity: int, shape: tuple[int, ...]) -> torch.Tensor:
+        """A zero buffer of ``capacity`` rows. On the CPU its memory comes from the
+        operating system's zeroed pages (numpy's ``calloc``), so the rows not yet written
+        cost no memory (``torch.zeros`` writes every row)."""
+        probe = torch.empty(0, dtype=self.dtype, device=self.device)  # the default device too
+        if probe.device.type == "cpu":
+            try:
+                np_dtype = probe.numpy().dtype
+            except (TypeError, RuntimeError):  # a dtype numpy does not have
+                pass
+            else:
+                return torch.from_numpy(np.zeros((capacity, *shape), dtype=np_dtype))
+        return torch.zeros(capacity, *shape, dtype=self.dtype, device=self.device)
+
     def _alloc(self, capacity: int) -> None:
         for name, shape in self._shapes().items():
-            tensor = torch.zeros(capacity, *shape, dtype=self.dtype, device=self.device)
+            tensor = self._zeros(capacity, shape)
             old = self._buffers.get("_" + name)
             if old is not None:
                 tensor[: self._n] = old[: self._n]
+            self._arrays.pop(name, None)  # the old buffer is freed once replaced
             self.register_buffer("_" + name, tensor, persistent=False)
+            del old
         frames = torch.full((capacity,), -1, dtype=torch.int64, device=self.device)
         old = self._buffers.get("_frames")
         if old is not None:

@@ -234,18 +234,29 @@ class TemplateView(nn.Module):
         return self.bank.append(t, frames)
 
     # -- state
-    def get_state(self) -> dict:
-        """Everything needed to resume: numpy arrays and Python scalars only."""
+    def get_state(self, *, share: bool = False) -> dict:
+        """Everything needed to resume: numpy arrays and Python scalars only.
+
+        Args:
+            share: the templates as a read-only view of the bank's rows (on the CPU)
+                rather than a copy: for a save that is done before the next frame (a
+                checkpoint then holds no second copy of the templates).
+        """
         shape = self.template_shape or (0, 0)
         n = len(self)
         bank = cast(TemplateBank, self.bank)  # set up whenever n > 0
+        if not n:
+            templates = np.zeros((0, *shape), np.float32)
+        elif share and bank.on_cpu:
+            templates = bank.data.numpy().view()
+            templates.flags.writeable = False
+        else:
+            templates = bank.data.cpu().numpy().copy()
         return {
             "kind": self.kind,
             "version": STATE_VERSION,
             "template_shape": np.asarray(shape, dtype=np.int64),
-            "templates": (
-                bank.data.cpu().numpy().copy() if n else np.zeros((0, *shape), np.float32)
-            ),
+            "templates": templates,
             "means": bank.means.cpu().numpy().copy() if n else np.zeros(0, np.float32),
             "frames": bank.frames.cpu().numpy().copy() if n else np.zeros(0, np.int64),
             "current_id": int(self.current_id),

@@ -24,6 +24,7 @@ import numpy as np
 from ratslam_graph.state import ExperienceMapState
 from torchratslam.errors import MapFormatError
 from torchratslam.local_view.state import LocalViewState
+from torchratslam.local_view.template_view import TemplateView
 from torchratslam.maps.compat import conform
 from torchratslam.maps.native import save_map
 from torchratslam.maps.stages import compose, decompose, experience_map_record
@@ -43,9 +44,14 @@ def _stateful(module: object, label: str) -> Stateful:
     return module
 
 
-def state_from_slam(slam: SlamSystem) -> MapState:
+def state_from_slam(slam: SlamSystem, *, share: bool = False) -> MapState:
     """The complete state of a running ``RatSLAM`` (or ``MultiSessionRatSLAM``) as a
     :class:`MapState` (from each module's ``get_state()``).
+
+    Args:
+        slam: the pipeline.
+        share: a template local view's templates as a read-only view of its bank, not a
+            copy (for a save done before the next frame, such as :func:`save_state`).
 
     Raises:
         MapFormatError: a module has no ``get_state`` / ``set_state``
@@ -57,7 +63,9 @@ def state_from_slam(slam: SlamSystem) -> MapState:
     odometry = slam.odometry
     return compose(
         slam.config.to_flat(),
-        LocalViewState.from_dict(lv.get_state()),
+        LocalViewState.from_dict(
+            lv.get_state(share=True) if share and isinstance(lv, TemplateView) else lv.get_state()
+        ),
         PoseCellState.from_dict(pc.get_state()),
         ExperienceMapState.from_dict(em.get_state()),
         slam.session,
@@ -69,7 +77,7 @@ def save_state(slam: SlamSystem, directory: str | Path) -> Path:
     """Save the complete state of a running ``RatSLAM`` (or ``MultiSessionRatSLAM``)
     to ``directory`` atomically (native format, see
     :func:`~torchratslam.maps.native.save_map`)."""
-    return save_map(state_from_slam(slam), directory)
+    return save_map(state_from_slam(slam, share=True), directory)
 
 
 def apply_state(state: MapState, slam: SlamSystem, *, exp_ids: np.ndarray | None = None) -> None:

@@ -32,7 +32,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+
+from ratslam_graph._jit import njit_cached
 
 _LOG_2PI = math.log(2.0 * math.pi)
 _TWO_PI = 2.0 * math.pi
@@ -50,7 +51,7 @@ _POW2_NEG = np.array([2.0**-k for k in range(64)])
 _POW2_FRAC = np.array([2.0 ** (-j / 32.0) for j in range(32)])
 
 
-@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+@njit_cached(nogil=True, error_model="numpy", inline="always")
 def _exp_neg(g: float) -> float:  # pragma: no cover - compiled
     """``exp(-g)`` for ``0 <= g <= _SKIP_D`` without a library call (so the loop over the
     beams vectorises): ``2**(-k/32) exp(-r)``, ``g = k ln(2) / 32 + r``,
@@ -62,7 +63,7 @@ def _exp_neg(g: float) -> float:  # pragma: no cover - compiled
     return p * (_POW2_NEG[(k >> 5) & 63] * _POW2_FRAC[k & 31])
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@njit_cached(nogil=True, error_model="numpy")
 def outlier_logp(  # pragma: no cover - compiled
     x: np.ndarray,
     mean: np.ndarray,
@@ -122,7 +123,7 @@ def outlier_logp(  # pragma: no cover - compiled
     return out
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@njit_cached(nogil=True, error_model="numpy")
 def updated_logs(  # pragma: no cover - compiled
     x: np.ndarray,
     mean: np.ndarray,
@@ -162,7 +163,7 @@ def updated_logs(  # pragma: no cover - compiled
     return out
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@njit_cached(nogil=True, error_model="numpy")
 def gauss_logp(  # pragma: no cover - compiled
     x: np.ndarray,
     mean: np.ndarray,
@@ -187,7 +188,7 @@ def gauss_logp(  # pragma: no cover - compiled
     return out
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@njit_cached(nogil=True, error_model="numpy")
 def normalise(logp: np.ndarray, logprior: np.ndarray) -> np.ndarray:  # pragma: no cover
     """Eqs. 1, 4 in log space: ``joint - logsumexp(joint)``, ``joint = logp + logprior``."""
     n = logp.shape[0]
@@ -201,7 +202,7 @@ def normalise(logp: np.ndarray, logprior: np.ndarray) -> np.ndarray:  # pragma: 
     return joint - (math.log(s) + m)
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@njit_cached(nogil=True, error_model="numpy")
 def combine(terms: np.ndarray) -> np.ndarray:  # pragma: no cover - compiled
     """Eq. 3 in log space: ``logsumexp`` over the channels (rows) of
     ``log alpha_k + log P(w_j | x_k)``. Shape: (K, n) -> (n,)."""
@@ -221,7 +222,7 @@ def combine(terms: np.ndarray) -> np.ndarray:  # pragma: no cover - compiled
     return out
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@njit_cached(nogil=True, error_model="numpy")
 def updated_logs_ang(  # pragma: no cover - compiled
     x: np.ndarray,
     mean: np.ndarray,
@@ -249,7 +250,7 @@ def updated_logs_ang(  # pragma: no cover - compiled
     return out
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@njit_cached(nogil=True, error_model="numpy")
 def learn_diag(  # pragma: no cover - compiled
     mean: np.ndarray,
     cov: np.ndarray,

@@ -22,8 +22,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
 
+from ratslam_graph._jit import njit_cached
 from torchratslam.pose_cells._taps import conv3
 
 __all__ = ["find_best", "minimal_arc", "pairwise_sum", "step_crop", "total"]
@@ -31,7 +31,7 @@ __all__ = ["find_best", "minimal_arc", "pairwise_sum", "step_crop", "total"]
 _BLOCK = 128  # numpy's PW_BLOCKSIZE
 
 
-@njit(cache=True, nogil=True)
+@njit_cached(nogil=True)
 def pairwise_sum(a: np.ndarray, lo: int, n: int, zero: float) -> float:  # pragma: no cover
     """numpy's pairwise sum of ``a[lo : lo + n]`` in ``a``'s dtype (``zero`` of that dtype).
 
@@ -65,7 +65,7 @@ def pairwise_sum(a: np.ndarray, lo: int, n: int, zero: float) -> float:  # pragm
     return pairwise_sum(a, lo, n2, zero) + pairwise_sum(a, lo + n2, n - n2, zero)
 
 
-@njit(cache=True, nogil=True)
+@njit_cached(nogil=True)
 def total(a: np.ndarray, block: int, zero: float) -> float:  # pragma: no cover - compiled
     """A pairwise sum of a contiguous array: from zero, one pairwise sum per block of
     ``block`` elements (``0``: the whole array in one block, as numpy 2 sums it), added
@@ -82,7 +82,7 @@ def total(a: np.ndarray, block: int, zero: float) -> float:  # pragma: no cover 
     return res
 
 
-@njit(cache=True, nogil=True)
+@njit_cached(nogil=True)
 def minimal_arc(mask: np.ndarray) -> tuple[int, int]:  # pragma: no cover - compiled
     """``(start, length)`` of the shortest circular arc holding every True of ``mask``
     (``(0, 0)`` when empty); on ties, the arc after the first longest empty run.
@@ -107,7 +107,7 @@ def minimal_arc(mask: np.ndarray) -> tuple[int, int]:  # pragma: no cover - comp
     return best, n - big
 
 
-@njit(cache=True, nogil=True)
+@njit_cached(nogil=True)
 def _position(
     sums: np.ndarray, ring: np.ndarray, sin_l: np.ndarray, cos_l: np.ndarray, n: int
 ) -> float:  # pragma: no cover - compiled
@@ -132,7 +132,7 @@ def _position(
     return x
 
 
-@njit(cache=True, nogil=True)
+@njit_cached(nogil=True)
 def find_best(
     act: np.ndarray,
     peak: int,
@@ -192,7 +192,7 @@ def find_best(
     )
 
 
-@njit(cache=True, nogil=True)
+@njit_cached(nogil=True)
 def _move(
     a: np.ndarray, axis: int, base: np.ndarray, step: np.ndarray, w: np.ndarray
 ) -> np.ndarray:  # pragma: no cover - compiled
@@ -222,7 +222,7 @@ def _move(
     return out
 
 
-@njit(cache=True, nogil=True)
+@njit_cached(nogil=True)
 def _edge_loss(
     out: np.ndarray,
     src: np.ndarray,
@@ -264,7 +264,7 @@ def _edge_loss(
             out[k, cy, cx] = out[k, cy, cx] - take[0]
 
 
-@njit(cache=True, nogil=True)
+@njit_cached(nogil=True)
 def step_crop(
     act: np.ndarray,
     box: np.ndarray,

@@ -14,10 +14,11 @@ fresh environment compiles them (a few seconds).
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+
+from ratslam_graph._jit import njit_cached
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit_cached(nogil=True, inline="always")
 def _add(  # pragma: no cover - compiled
     out: np.ndarray, a: np.ndarray, wj: float, dst: int, src: int, m: int
 ) -> None:
@@ -28,7 +29,7 @@ def _add(  # pragma: no cover - compiled
         o[i] = o[i] + wj * v[i]
 
 
-@njit(cache=True, nogil=True)
+@njit_cached(nogil=True)
 def conv_axis(  # pragma: no cover - compiled
     a: np.ndarray, w: np.ndarray, outer: int, n: int, inner: int, circular: bool
 ) -> np.ndarray:
@@ -62,7 +63,7 @@ def conv_axis(  # pragma: no cover - compiled
     return out
 
 
-@njit(cache=True, nogil=True)
+@njit_cached(nogil=True)
 def conv3(  # pragma: no cover - compiled
     a: np.ndarray, w: np.ndarray, circ_t: bool, circ_y: bool, circ_x: bool
 ) -> np.ndarray:

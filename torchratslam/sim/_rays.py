@@ -13,10 +13,11 @@ fresh environment compiles them (a few seconds).
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+
+from ratslam_graph._jit import njit_cached
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@njit_cached(nogil=True, error_model="numpy")
 def nearest_hits(  # pragma: no cover - compiled
     rx: np.ndarray,
     ry: np.ndarray,

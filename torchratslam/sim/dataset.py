@@ -27,7 +27,6 @@ from pathlib import Path
 from typing import Any
 from urllib.parse import parse_qsl
 
-import cv2
 import numpy as np
 import yaml
 
@@ -182,6 +181,8 @@ def write_dataset(
     tmp.mkdir()
     try:
         (tmp / "frames").mkdir()
+        import cv2  # only writing frames needs it
+
         n = len(session)
         scans: dict[str, list[np.ndarray]] = {k: [] for k in session.lasers}
         it = range(n)

@@ -13,13 +13,14 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+
+from ratslam_graph._jit import njit_cached
 
 PI = math.pi
 TWO_PI = 2.0 * math.pi
 
 
-@njit(cache=True, nogil=True)
+@njit_cached(nogil=True)
 def add_links(
     head: np.ndarray,
     nxt: np.ndarray,
@@ -42,7 +43,7 @@ def add_links(
             head[node] = slot
 
 
-@njit(cache=True, nogil=True)
+@njit_cached(nogil=True)
 def local_sweeps(
     pose: np.ndarray,
     src: np.ndarray,

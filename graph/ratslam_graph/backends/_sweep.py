@@ -16,7 +16,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+
+from ratslam_graph._jit import njit_cached
 
 PI = math.pi
 TWO_PI = 2.0 * math.pi
@@ -25,7 +26,7 @@ IDLE_SHARE = 16
 on in :func:`sweep_skipping`."""
 
 
-@njit(cache=True, nogil=True)
+@njit_cached(nogil=True)
 def clip_rad_180(a: float) -> float:  # pragma: no cover - compiled
     """OpenRatSLAM's ``clip_rad_180``: to ``(-pi, pi]`` by whole turns."""
     while a > PI:
@@ -35,7 +36,7 @@ def clip_rad_180(a: float) -> float:  # pragma: no cover - compiled
     return a
 
 
-@njit(cache=True, nogil=True)
+@njit_cached(nogil=True)
 def clip_rad_360(a: float) -> float:  # pragma: no cover - compiled
     """OpenRatSLAM's ``clip_rad_360``: to ``[0, 2 pi)`` by whole turns."""
     while a < 0.0:
@@ -45,7 +46,7 @@ def clip_rad_360(a: float) -> float:  # pragma: no cover - compiled
     return a
 
 
-@njit(cache=True, nogil=True)
+@njit_cached(nogil=True)
 def get_signed_delta_rad(a1: float, a2: float) -> float:  # pragma: no cover - compiled
     """OpenRatSLAM's ``get_signed_delta_rad`` (from ``a1`` to ``a2``)."""
     direction = clip_rad_180(a2 - a1)
@@ -55,7 +56,7 @@ def get_signed_delta_rad(a1: float, a2: float) -> float:  # pragma: no cover - c
     return TWO_PI - delta if direction > 0 else -(TWO_PI - delta)
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit_cached(nogil=True, inline="always")
 def relax_link(
     pose: np.ndarray, f: int, t: int, link: np.ndarray, k: int, c: float
 ) -> bool:  # pragma: no cover - compiled
@@ -88,7 +89,7 @@ def relax_link(
     return nxf != xf or nyf != yf or nxt != xt or nyt != yt or nthf != thf or ntht != tht
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit_cached(nogil=True, inline="always")
 def _settled(pose: np.ndarray, f: int, t: int) -> bool:  # pragma: no cover - compiled
     """True if no coordinate of the two ends is zero (a product that underflows to zero
     only says False, the safe answer): for non-zero floats an equal value is an equal
@@ -96,7 +97,7 @@ def _settled(pose: np.ndarray, f: int, t: int) -> bool:  # pragma: no cover - co
     return pose[f, 0] * pose[f, 1] * pose[f, 2] * pose[t, 0] * pose[t, 1] * pose[t, 2] != 0.0
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit_cached(nogil=True, inline="always")
 def _idle_pass(
     pose: np.ndarray, src: np.ndarray, dst: np.ndarray, link: np.ndarray, c: float
 ) -> int:  # pragma: no cover - compiled
@@ -108,7 +109,7 @@ def _idle_pass(
     return idle
 
 
-@njit(cache=True, nogil=True)
+@njit_cached(nogil=True)
 def sweep(
     pose: np.ndarray,
     src: np.ndarray,
@@ -137,7 +138,7 @@ def sweep(
     return passes
 
 
-@njit(cache=True, nogil=True)
+@njit_cached(nogil=True)
 def sweep_skipping(
     pose: np.ndarray,
     src: np.ndarray,
@@ -185,7 +186,7 @@ def sweep_skipping(
     return passes
 
 
-@njit(cache=True, nogil=True)
+@njit_cached(nogil=True)
 def sweep_window(
     pose: np.ndarray,
     src: np.ndarray,
@@ -216,7 +217,7 @@ def sweep_window(
     return k, changed
 
 
-@njit(cache=True, nogil=True)
+@njit_cached(nogil=True)
 def insert_link(
     order: np.ndarray,
     src: np.ndarray,

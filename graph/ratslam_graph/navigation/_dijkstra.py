@@ -13,10 +13,11 @@ from __future__ import annotations
 import heapq
 
 import numpy as np
-from numba import njit
+
+from ratslam_graph._jit import njit_cached
 
 
-@njit(cache=True, nogil=True)
+@njit_cached(nogil=True)
 def dijkstra(
     indptr: np.ndarray, nbr: np.ndarray, time: np.ndarray, start: int
 ) -> tuple[np.ndarray, np.ndarray]:  # pragma: no cover - compiled

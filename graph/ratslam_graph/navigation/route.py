@@ -21,7 +21,6 @@ from __future__ import annotations
 
 import itertools
 
-import networkx as nx
 import numpy as np
 
 from ratslam_graph.errors import GraphError, InputError
@@ -88,6 +87,8 @@ def dijkstra_route(
     Raises:
         GraphError: if the goal cannot be reached.
     """
+    import networkx as nx  # only this check needs it
+
     g = nx.DiGraph() if directed else nx.Graph()
     g.add_nodes_from(range(num_nodes))
     for a, b, w in zip(np.asarray(src).tolist(), np.asarray(dst).tolist(), np.asarray(dt).tolist()):

@@ -59,3 +59,23 @@ def test_a_measured_ate_names_its_alignment_and_what_it_compares():
     assert "ate_alignment" not in BASE.to_json()  # no ground truth: no ATE to name
     line = summary_line(replace(BASE, ate_rmse_m=0.5, ate_frames=9), Path("o"))
     assert "ATE 0.500 m (SE(2)-aligned, over 9 of 10 frames with ground truth)" in line
+
+
+def test_created_frames_read_from_the_arrays_are_the_graphs():
+    """experiences.csv's creation frames come from the map's arrays (no networkx graph
+    built for them): the same as each node's ``frame`` in the graph."""
+    import numpy as np
+
+    from ratslam_graph.experience_map import ExperienceMap
+    from ratslam_graph.messages import Action, ActionKind
+    from torchratslam.experiments.run_outputs import _created_frames
+
+    em = ExperienceMap()
+    frames = [3, 7, 8, 20]
+    for i, frame in enumerate(frames):
+        em.on_odometry(1.0, 0.3, 1.0)
+        em.apply(Action(ActionKind.CREATE, dest_id=i), frame=frame)
+    got = _created_frames(em, len(em))
+    g = em.graph
+    assert got.dtype == np.int64
+    assert got.tolist() == [g.nodes[i]["frame"] for i in range(len(em))] == frames

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 import torch
@@ -90,3 +92,24 @@ def test_bad_templates_and_sizes_are_clear_errors():
         bank.summary("nothing")
     with pytest.raises(ConfigError, match="positive"):
         TemplateBank(0, 5)
+
+
+def _rss_mib() -> float:
+    for line in open("/proc/self/status"):
+        if line.startswith("VmRSS:"):
+            return int(line.split()[1]) / 1024.0
+    raise AssertionError("no VmRSS line")
+
+
+@pytest.mark.skipif(not Path("/proc/self/status").exists(), reason="reads /proc (Linux)")
+def test_capacity_not_written_costs_no_memory_and_reads_as_zeros():
+    """A CPU bank's rows not yet written are the system's zero pages: a capacity of
+    2**16 rows (384 MiB of float64) adds a few MiB at most, and reads as zeros."""
+    before = _rss_mib()
+    bank = TemplateBank(16, 48, capacity=2**16, dtype=torch.float64)
+    bank.append(torch.ones(3, 16, 48, dtype=torch.float64), 0)
+    grown = _rss_mib() - before
+    assert grown < 16.0, f"{grown:.1f} MiB for 3 rows of 6 KiB"
+    data = bank.array("data")
+    assert data.shape == (2**16, 16, 48)
+    assert (data[:3] == 1).all() and not data[3:4096].any() and not data[-4096:].any()

@@ -357,6 +357,24 @@ def test_state_round_trip_and_add_templates():
         LocalView(cfg.local_view).set_state(dict(state, version=99))
 
 
+def test_a_shared_state_is_a_read_only_view_of_the_rows_equal_to_the_copy():
+    """``get_state(share=True)`` (a checkpoint's) holds the same templates as the copy,
+    without copying them, and cannot be written through."""
+    rng = np.random.default_rng(14)
+    lv = LocalView(load_config("irat").local_view)
+    for i in range(5):
+        lv.process(rng.integers(0, 256, (120, 160)).astype(np.uint8), frame_index=i)
+    copied, shared = lv.get_state(), lv.get_state(share=True)
+    assert copied.keys() == shared.keys()
+    for k, v in copied.items():
+        assert np.array_equal(np.asarray(v), np.asarray(shared[k])), k
+    rows = lv.bank.array("data")
+    assert np.shares_memory(shared["templates"], rows)
+    assert not np.shares_memory(copied["templates"], rows)
+    with pytest.raises(ValueError, match="read-only"):
+        shared["templates"][0, 0, 0] = 1.0
+
+
 # --------------------------------------------------------------- generic sensors
 
 
