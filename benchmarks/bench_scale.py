@@ -101,8 +101,9 @@ def _ate_from_ids(data: Path, exp_ids: np.ndarray, exp_xy: dict[int, np.ndarray]
 _PEAK_PROBE = (
     "import resource, subprocess, sys\n"
     "with open(sys.argv[1], 'w') as log:\n"
-    "    subprocess.run(sys.argv[2:], check=True, stdout=log)\n"
+    "    rc = subprocess.run(sys.argv[2:], stdout=log).returncode\n"
     "print(resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss)\n"
+    "sys.exit(rc)\n"
 )
 
 
@@ -117,12 +118,13 @@ def run_peak(cmd: list[str], log: Path) -> tuple[float, float]:
     """
     t0 = time.perf_counter()
     done = subprocess.run(
-        [sys.executable, "-c", _PEAK_PROBE, str(log), *cmd],
-        check=True,
-        capture_output=True,
-        text=True,
+        [sys.executable, "-c", _PEAK_PROBE, str(log), *cmd], capture_output=True, text=True
     )
     wall = time.perf_counter() - t0
+    if done.returncode != 0:  # the command's own words on why
+        said = [ln.strip() for ln in done.stderr.splitlines() if ln.strip()]
+        why = next((ln for ln in said if "error:" in ln.lower()), said[-1] if said else "")
+        raise RuntimeError(f"{' '.join(cmd[:4])} ... exited {done.returncode}: {why}")
     return wall, float(done.stdout.strip().splitlines()[-1]) / 1024.0
 
 
@@ -165,6 +167,7 @@ def run_py(data: Path, sets: list[str], out: Path) -> dict[str, Any]:
         str(out),
         "--no-progress",
         "--scale-report",
+        "--overwrite",  # the bench's own run directory, replaced on every run
     ]
     for s in sets:
         cmd += ["--set", s]
