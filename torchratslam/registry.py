@@ -15,7 +15,6 @@ Example:
 from __future__ import annotations
 
 import inspect
-import typing
 from collections.abc import Callable, Iterator
 from typing import Any, Generic, TypeVar
 
@@ -50,17 +49,12 @@ _MISSING = object()
 
 
 def _has_members(obj: Any, protocol: type) -> bool:
-    """Whether ``obj`` has every member of ``protocol``, looked up as Python 3.12's
-    ``isinstance`` does (:func:`inspect.getattr_static`): no property is evaluated (3.11's
-    ``hasattr`` would, and an experience map's networkx graph would be built, and networkx
-    imported, by the check). False when it cannot tell (then ``isinstance`` decides)."""
-    attrs = getattr(protocol, "__protocol_attrs__", None)
-    if attrs is None:
-        get = getattr(typing, "_get_protocol_attrs", None)
-        if get is None:
-            return False
-        attrs = get(protocol)
-    for name in attrs:
+    """Whether ``obj`` has every member of ``protocol`` (:func:`_interface`), looked up as
+    Python 3.12's ``isinstance`` does (:func:`inspect.getattr_static`): no property is
+    evaluated (3.11's ``hasattr`` would, and an experience map's networkx graph would be
+    built, and networkx imported, by the check). False when one is missing (then
+    ``isinstance`` decides)."""
+    for name in _interface(protocol):
         found = inspect.getattr_static(obj, name, _MISSING)
         if found is _MISSING or (found is None and callable(getattr(protocol, name, None))):
             return False
