@@ -11,12 +11,22 @@ the loop tour with the virtual_tour config, single thread; the group's rows must
 the separate runs' (checked here too). Throughput is run-frames per second of
 wall-clock time (B x frames / seconds). ``BENCH_QUICK=1`` uses fewer frames and
 smaller groups.
+
+:func:`measure_cli` times the same 16 combinations from the command line
+(``torchratslam sweep FILE --workers 1`` against ``--no-batch``, one fresh process each,
+import and compilation cache included) on the whole loop (``sim:loop``, 1781 frames),
+with the virtual_tour config and with the loop's OpenRatSLAM comparison config, and
+says how many of the 16 maps differ.
 """
 
 from __future__ import annotations
 
+import csv
 import os
+import subprocess
+import sys
 import time
+from pathlib import Path
 
 import torch
 
@@ -58,7 +68,9 @@ def measure(quick: bool = False, default_only: bool = False) -> list[dict]:
     (``default_only``: the default behaviour's case only)."""
     frames = 120 if quick else 240
     out = []
-    cases = [((21, 36), {}, (4,) if quick else (16,))]
+    cases: list[tuple[tuple[int, int], dict, tuple[int, ...]]] = [
+        ((21, 36), {}, (4,) if quick else (16,))
+    ]
     if not (quick or default_only):
         cases.append(((21, 36), TORCH_STEP, (16,)))
         cases.append(((80, 35), {}, (8,)))
@@ -90,6 +102,103 @@ def measure(quick: bool = False, default_only: bool = False) -> list[dict]:
     return out
 
 
+CLI_BASES = (
+    ("virtual_tour", "virtual_tour", "exp_loops 250"),
+    ("loop comparison", "loop.txt", "OpenRatSLAM's loop settings, exp_loops 20"),
+)
+
+
+def _combos() -> dict[str, list[float]]:
+    combos = [(e, t, c) for c in CORRECTIONS for t in THRESHOLDS for e in ENERGIES]
+    return {
+        "pc_vt_inject_energy": [c[0] for c in combos],
+        "exp_delta_pc_threshold": [c[1] for c in combos],
+        "exp_correction": [c[2] for c in combos],
+    }
+
+
+def _sweep_file(folder: Path, base: str, frames: int | None) -> Path:
+    import yaml
+
+    data: dict = {"data": "sim:loop"}
+    if frames is not None:
+        data["max_frames"] = frames
+    spec = {"base": base, "mode": "list", "parameters": _combos(), "datasets": [data]}
+    path = folder / "sweep.yaml"
+    path.write_text(yaml.safe_dump(spec, sort_keys=False))
+    return path
+
+
+def _cli_sweep(spec: Path, out: Path, batch: bool) -> tuple[float, list[dict]]:
+    cmd = [sys.executable, "-m", "torchratslam", "sweep", str(spec), "--out", str(out)]
+    cmd += ["--workers", "1", "--no-figures", "--no-progress", "--overwrite"]
+    if not batch:
+        cmd.append("--no-batch")
+    t0 = time.perf_counter()
+    done = subprocess.run(cmd, capture_output=True, text=True)
+    wall = time.perf_counter() - t0
+    if done.returncode != 0:
+        said = [ln.strip() for ln in done.stderr.splitlines() if ln.strip()]
+        raise RuntimeError(f"torchratslam sweep exited {done.returncode}: {said[-1:]}")
+    with (out / "results.csv").open(newline="") as fh:
+        rows = [dict(r) for r in csv.DictReader(fh)]
+    return wall, rows
+
+
+def measure_cli(out: Path, quick: bool = False) -> list[dict]:
+    """16 runs from the command line, separate (``--no-batch``) then grouped, for each
+    base config of :data:`CLI_BASES`; one row each (wall seconds of both commands,
+    whether the tables agree outside the timing columns, distinct maps)."""
+    from benchmarks.openratslam import LOOP_TXT
+
+    frames = 300 if quick else None
+    rows = []
+    for name, base, what in CLI_BASES:
+        folder = out / "sweep" / base.replace(".", "_")
+        folder.mkdir(parents=True, exist_ok=True)
+        if base.endswith(".txt"):
+            (folder / base).write_text(LOOP_TXT.format(threshold=0.06))
+            base = str(folder / base)
+        spec = _sweep_file(folder, base, frames)
+        t_sep, separate = _cli_sweep(spec, folder / "separate", batch=False)
+        t_grp, grouped = _cli_sweep(spec, folder / "grouped", batch=True)
+        maps = {(r["experiences"], r["links"], r["ate_m"]) for r in separate}
+        rows.append(
+            {
+                "config": f"{name} ({what})",
+                "frames": int(separate[0]["frames"]),
+                "runs": len(separate),
+                "maps": len(maps),
+                "separate_s": t_sep,
+                "group_s": t_grp,
+                "equal": _strip(separate) == _strip(grouped),
+            }
+        )
+    return rows
+
+
+def print_cli_table(rows: list[dict]) -> None:
+    """The rows of :func:`measure_cli` as a Markdown table."""
+    print(
+        "16 runs (pc_vt_inject_energy x exp_delta_pc_threshold x exp_correction) from the "
+        "command line,\n`torchratslam sweep FILE --workers 1` with `--no-batch` (separate) "
+        "and without (grouped);\n'distinct maps': different (experiences, links, ATE) "
+        "among the 16.\n"
+    )
+    print(
+        "| config | frames | runs | distinct maps | separate (s) | grouped (s) | speed-up "
+        "| same rows |"
+    )
+    print("|---|---|---|---|---|---|---|---|")
+    for r in rows:
+        print(
+            f"| {r['config']} | {r['frames']} | {r['runs']} | {r['maps']} | "
+            f"{r['separate_s']:.1f} | {r['group_s']:.1f} | "
+            f"{r['separate_s'] / r['group_s']:.2f}x | {'yes' if r['equal'] else 'NO'} |"
+        )
+    print()
+
+
 def print_table(rows: list[dict]) -> None:
     """The rows of :func:`measure` as a Markdown table, with what they are."""
     print("B configurations differing in pc_vt_inject_energy / exp_delta_pc_threshold /")
@@ -117,6 +226,7 @@ def main() -> None:
     torch.set_num_threads(1)
     quick = os.environ.get("BENCH_QUICK", "") not in ("", "0")
     print_table(measure(quick))
+    print_cli_table(measure_cli(Path(os.environ.get("BENCH_OUT", "out/bench")), quick))
 
 
 if __name__ == "__main__":

@@ -494,7 +494,7 @@ def main(
     print("[speed] sweep, grouped against separate runs", file=sys.stderr, flush=True)
     from benchmarks import bench_sweep
 
-    bench_sweep.print_table(bench_sweep.measure(quick, default_only=True))
+    bench_sweep.print_cli_table(bench_sweep.measure_cli(p.out, quick))
     print(
         f"(speed report: {time.perf_counter() - t0:.0f} s; load average "
         f"{load0:.1f} at the start, {os.getloadavg()[0]:.1f} at the end)"

@@ -31,8 +31,14 @@ bookkeeping and experience map. When the network computes its dynamics on the wh
 network (``separable``/``conv3d``, e.g. OpenRatSLAM's 21x21x36), one
 :class:`PoseCellNetwork` with ``B`` networks steps all runs in one call per frame;
 cropped networks (large ones) step one by one, since a batch's crop box follows its
-widest packet and would change the others' rounding. Either way the rows equal
-separate runs' bit for bit (``tests/torchratslam/sweeps/test_batched.py``).
+widest packet and would change the others' rounding. Stepped one by one, runs with
+equal pose-cell keys (a sweep of experience-map keys alone) step one module between
+them. A run whose every key outside the pose-cell module's own equals an earlier run's,
+and whose pose cells gave the same actions, centres and injection angles on every frame,
+would compute that run's map again number for number: it takes the earlier run's
+metrics instead (its ``wall_s`` is then its share of the group's common work). Either
+way the rows equal separate runs' bit for bit
+(``tests/torchratslam/sweeps/test_batched.py``).
 """
 
 from __future__ import annotations
@@ -45,6 +51,7 @@ from typing import Any
 
 import numpy as np
 
+from torchratslam.sweeps.replay import MODULE_ONLY_PC_KEYS, GroupPass, replay
 from torchratslam.sweeps.spec import RunSpec
 
 __all__ = [
@@ -76,11 +83,6 @@ METRICS = (
 TIMING_COLUMNS = ("wall_s", "fps", *(f"ms_{m}" for m in MODULES), "batch")
 """Columns that depend on the machine's speed or the execution (excluded when tables
 are compared for determinism)."""
-
-# Pose-cell keys read by the pose-cell *module* only, not by its network.
-MODULE_ONLY_PC_KEYS = frozenset(
-    {"vt_active_decay", "pc_vt_inject_energy", "pc_vt_restore", "exp_delta_pc_threshold"}
-)
 
 
 def _identity(run: RunSpec, backend: str) -> dict[str, Any]:
@@ -249,60 +251,6 @@ class _SlotNetwork:
         return (c[0], c[1], c[2])
 
 
-class _ReplayView:
-    """A local view that hands out views computed once for a whole group."""
-
-    def __init__(self, views: list[Any], sizes: list[int], templates: Any) -> None:
-        self._views, self._sizes, self._templates = views, sizes, templates
-        self._i = 0
-
-    def process(self, observation: Any, frame_index: int | None = None) -> Any:
-        view = self._views[self._i]
-        self._i += 1
-        return view
-
-    def __len__(self) -> int:
-        return self._sizes[self._i - 1] if self._i else 0
-
-    @property
-    def templates(self) -> Any:
-        return self._templates
-
-
-class _ReplayPoseCells:
-    """A pose-cell module that hands out the actions, centres and injection angles
-    (``vt_delta_pc_th``, what the pipeline's ``action_angle: injection`` reads) of a
-    group's pass, frame by frame."""
-
-    def __init__(
-        self, actions: list[Any], centres: list[tuple], angles: list[float], module: Any
-    ) -> None:
-        self._actions, self._centres, self._angles = actions, centres, angles
-        self._module = module
-        self._i = -1
-
-    def on_view_template(self, match: Any) -> None:
-        self._i += 1
-
-    def on_odometry(self, vtrans: float, vrot: float, dt: float) -> Any:
-        return self._actions[self._i]
-
-    @property
-    def centre(self) -> tuple[float, float, float]:
-        return self._centres[self._i]
-
-    @property
-    def vt_delta_pc_th(self) -> float:
-        return self._angles[self._i]
-
-    @property
-    def activity(self) -> Any:
-        return self._module.activity
-
-    def __getattr__(self, name: str) -> Any:  # state, counts: the real module's
-        return getattr(self._module, name)
-
-
 def _frames(data: Any, max_frames: int | None) -> Iterator[Any]:
     it = iter(data.frames()) if hasattr(data, "frames") else iter(data)
     for i, frame in enumerate(it):
@@ -336,7 +284,12 @@ def run_group(runs: Sequence[RunSpec]) -> list[dict[str, Any]]:
     modules = [PoseCells(c.pose_cells, dtype=ref.dtype) for c in configs]
     slots: list[_SlotNetwork] = []
     shared = None
-    if shares_network(modules[0].network, configs[0].pose_cells.pc_engine):
+    batched = shares_network(modules[0].network, configs[0].pose_cells.pc_engine)
+    owner = list(range(len(runs)))
+    if not batched:  # runs with equal pose-cell keys step one module: the same numbers
+        first: dict[Any, int] = {}
+        owner = [first.setdefault(c.pose_cells, b) for b, c in enumerate(configs)]
+    else:
         shared = PoseCellNetwork(
             configs[0].pose_cells, len(runs), dtype=ref.dtype, method=modules[0].network.method
         )
@@ -344,25 +297,23 @@ def run_group(runs: Sequence[RunSpec]) -> list[dict[str, Any]]:
             slot = _SlotNetwork(shared, b, m.network.dims)
             m.network = slot  # type: ignore[assignment]  # the slot steps like a network
             slots.append(slot)
-    frames, odos, views, sizes = [], [], [], []
-    actions: list[list[Any]] = [[] for _ in runs]
-    centres: list[list[tuple]] = [[] for _ in runs]
-    angles: list[list[float]] = [[] for _ in runs]
+    stepped = sorted(set(owner))
+    rec = GroupPass(modules, owner)
     t_odo = t_view = t_pc = 0.0
     zeros = np.zeros(len(runs), dtype=np.int64)
     skip_first = bool(configs[0].general.skip_first_odometry)  # a key the group shares
     for i, frame in enumerate(_frames(data, runs[0].max_frames)):
-        frames.append(frame)
+        rec.frames.append(frame)
         c0 = time.perf_counter()
         odo = tuple(float(v) for v in ref.odometry(frame))
         c1 = time.perf_counter()
         view = ref.local_view.process(frame.image, frame_index=i)
         c2 = time.perf_counter()
-        odos.append(odo)
-        views.append(view)
-        sizes.append(len(ref.local_view))
-        for m in modules:
-            m.on_view_template(view)
+        rec.odos.append(odo)  # type: ignore[arg-type]
+        rec.views.append(view)
+        rec.sizes.append(len(ref.local_view))
+        for b in stepped:
+            modules[b].on_view_template(view)
         skip = skip_first and i == 0
         if shared is not None:  # every network in one call
             inj = [s.pending for s in slots]
@@ -377,46 +328,30 @@ def run_group(runs: Sequence[RunSpec]) -> list[dict[str, Any]]:
                 cents = shared.step(odo[0], odo[1], odo[2])
                 for b, slot in enumerate(slots):
                     slot.centre_row = cents[b : b + 1]
-        for b, m in enumerate(modules):
-            actions[b].append(Action.none() if skip else m.on_odometry(*odo))
+        for b in stepped:
+            m = modules[b]
+            rec.actions[b].append(Action.none() if skip else m.on_odometry(*odo))
             c = m.centre
-            centres[b].append((float(c[0]), float(c[1]), float(c[2])))
-            angles[b].append(float(m.vt_delta_pc_th))
+            rec.centres[b].append((float(c[0]), float(c[1]), float(c[2])))
+            rec.angles[b].append(float(m.vt_delta_pc_th))
         c3 = time.perf_counter()
         t_odo += c1 - c0
         t_view += c2 - c1
         t_pc += c3 - c2
+    rec.templates = ref.local_view.templates
     shared_s = time.perf_counter() - t0
-    n = max(len(frames), 1)
+    n, B = max(len(rec.frames), 1), len(runs)
     rows = []
-    templates = ref.local_view.templates
-    for b, (run, config) in enumerate(zip(runs, configs)):
-        t1 = time.perf_counter()
-        slam = RatSLAM(
-            config,
-            local_view=_ReplayView(views, sizes, templates),
-            pose_cells=_ReplayPoseCells(actions[b], centres[b], angles[b], modules[b]),
-            odometry=_ReplayOdometry(odos),  # type: ignore[arg-type]
-        )
-        result = slam.run(frames, progress=False)
-        own = time.perf_counter() - t1
+    replays = replay(rec, configs, lambda slam, res: _metrics(slam, res, data, 1.0, B))
+    for run, config, (metrics, own) in zip(runs, configs, replays):
+        wall = shared_s / B + own
         row = _identity(run, config.experience_map.exp_backend)
-        row.update(_metrics(slam, result, data, shared_s / len(runs) + own, len(runs)))
-        row["ms_odometry"] = t_odo / n * 1e3 / len(runs)
-        row["ms_local_view"] = t_view / n * 1e3 / len(runs)
-        row["ms_pose_cells"] = t_pc / n * 1e3 / len(runs)
+        row.update(metrics, wall_s=wall, fps=float(metrics["frames"] / wall) if wall > 0 else 0.0)
+        row["ms_odometry"] = t_odo / n * 1e3 / B
+        row["ms_local_view"] = t_view / n * 1e3 / B
+        row["ms_pose_cells"] = t_pc / n * 1e3 / B
         rows.append(row)
     return rows
-
-
-class _ReplayOdometry:
-    def __init__(self, odos: list[tuple[float, float, float]]) -> None:
-        self._odos, self._i = odos, 0
-
-    def __call__(self, frame: Any) -> tuple[float, float, float]:
-        odo = self._odos[self._i]
-        self._i += 1
-        return odo
 
 
 def run_group_safely(runs: Sequence[RunSpec]) -> list[dict[str, Any]]:

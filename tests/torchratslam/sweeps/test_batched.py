@@ -100,3 +100,53 @@ def test_keys_of_the_network_split_groups_in_every_profile():
             }
         )
         assert len({batch_key(r) for r in spec.runs()}) == 2
+
+
+def _count_calls(monkeypatch, owner, name):
+    calls = []
+    original = getattr(owner, name)
+
+    def counted(self, *args, **kwargs):
+        calls.append(id(self))
+        return original(self, *args, **kwargs)
+
+    monkeypatch.setattr(owner, name, counted)
+    return calls
+
+
+def test_runs_with_the_same_inputs_share_their_work(monkeypatch):
+    """One lap re-sees no template, so the injected energy cannot act: the runs that
+    differ only in it compute the same pose cells and the same map. The group steps one
+    pose-cell module per distinct set of pose-cell keys and replays one map per distinct
+    set of inputs and keys, and every row still equals its separate run's."""
+    import torchratslam.sweeps.replay as replay
+
+    spec = from_dict(
+        {
+            "base": "virtual_tour",
+            "set": {"exp_loops": 20},
+            "parameters": {
+                "pc_vt_inject_energy": [0.05, 0.3, 0.05],
+                "exp_correction": [0.5, 0.7],
+            },
+            "datasets": ["sim:loop?laps=1&frames=40&lasers=0"],
+        }
+    )
+    runs = spec.runs()
+    assert len(runs) == 6 and len({batch_key(r) for r in runs}) == 1
+    separate = [_strip(run_one(r)) for r in runs]
+    by_correction = {}
+    for r, s in zip(runs, separate):  # the energy is inert here: one map per correction
+        by_correction.setdefault(r.params["exp_correction"], []).append(
+            {k: v for k, v in s.items() if k not in ("index", "run_id", "pc_vt_inject_energy")}
+        )
+    assert all(all(m == maps[0] for m in maps) for maps in by_correction.values())
+    assert by_correction[0.5][0] != by_correction[0.7][0]
+    replays = _count_calls(monkeypatch, replay._ReplayPoseCells, "__init__")
+    steps = _count_calls(monkeypatch, PoseCells, "on_odometry")
+    grouped = run_group(runs)
+    assert [_strip(g) for g in grouped] == separate
+    assert len(replays) == 2  # one map per exp_correction
+    # two distinct pose-cell configurations (0.05 twice), each stepped once a frame
+    assert len(set(steps)) == 2
+    assert len(steps) == 2 * (separate[0]["frames"] - 1)  # no step at frame 0
