@@ -182,11 +182,11 @@ def print_cli_table(rows: list[dict]) -> None:
     print(
         "16 runs (pc_vt_inject_energy x exp_delta_pc_threshold x exp_correction) from the "
         "command line,\n`torchratslam sweep FILE --workers 1` with `--no-batch` (separate) "
-        "and without (grouped);\n'distinct maps': different (experiences, links, ATE) "
+        "and without (grouped);\n'distinct results': different (experiences, links, ATE) "
         "among the 16.\n"
     )
     print(
-        "| config | frames | runs | distinct maps | separate (s) | grouped (s) | speed-up "
+        "| config | frames | runs | distinct results | separate (s) | grouped (s) | speed-up "
         "| same rows |"
     )
     print("|---|---|---|---|---|---|---|---|")
