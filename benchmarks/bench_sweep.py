@@ -16,7 +16,7 @@ smaller groups.
 (``torchratslam sweep FILE --workers 1`` against ``--no-batch``, one fresh process each,
 import and compilation cache included) on the whole loop (``sim:loop``, 1781 frames),
 with the virtual_tour config and with the loop's OpenRatSLAM comparison config, and
-says how many of the 16 maps differ.
+says how many of the 16 results (experiences, links, ATE) differ.
 """
 
 from __future__ import annotations
@@ -148,7 +148,7 @@ def _cli_sweep(spec: Path, out: Path, batch: bool) -> tuple[float, list[dict]]:
 def measure_cli(out: Path, quick: bool = False) -> list[dict]:
     """16 runs from the command line, separate (``--no-batch``) then grouped, for each
     base config of :data:`CLI_BASES`; one row each (wall seconds of both commands,
-    whether the tables agree outside the timing columns, distinct maps)."""
+    whether the tables agree outside the timing columns, distinct results)."""
     from benchmarks.openratslam import LOOP_TXT
 
     frames = 300 if quick else None
@@ -162,13 +162,13 @@ def measure_cli(out: Path, quick: bool = False) -> list[dict]:
         spec = _sweep_file(folder, base, frames)
         t_sep, separate = _cli_sweep(spec, folder / "separate", batch=False)
         t_grp, grouped = _cli_sweep(spec, folder / "grouped", batch=True)
-        maps = {(r["experiences"], r["links"], r["ate_m"]) for r in separate}
+        results = {(r["experiences"], r["links"], r["ate_m"]) for r in separate}
         rows.append(
             {
                 "config": f"{name} ({what})",
                 "frames": int(separate[0]["frames"]),
                 "runs": len(separate),
-                "maps": len(maps),
+                "distinct": len(results),
                 "separate_s": t_sep,
                 "group_s": t_grp,
                 "equal": _strip(separate) == _strip(grouped),
@@ -192,7 +192,7 @@ def print_cli_table(rows: list[dict]) -> None:
     print("|---|---|---|---|---|---|---|---|")
     for r in rows:
         print(
-            f"| {r['config']} | {r['frames']} | {r['runs']} | {r['maps']} | "
+            f"| {r['config']} | {r['frames']} | {r['runs']} | {r['distinct']} | "
             f"{r['separate_s']:.1f} | {r['group_s']:.1f} | "
             f"{r['separate_s'] / r['group_s']:.2f}x | {'yes' if r['equal'] else 'NO'} |"
         )

@@ -39,9 +39,9 @@ class GroupPass:
     views: list[Any] = field(default_factory=list)
     sizes: list[int] = field(default_factory=list)
     templates: Any = None
-    actions: list[list[Any]] = field(default_factory=list)
-    centres: list[list[tuple]] = field(default_factory=list)
-    angles: list[list[float]] = field(default_factory=list)
+    actions: list[list[Any]] = field(init=False)
+    centres: list[list[tuple]] = field(init=False)
+    angles: list[list[float]] = field(init=False)
 
     def __post_init__(self) -> None:
         n = len(self.modules)
