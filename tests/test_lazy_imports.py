@@ -90,8 +90,9 @@ def test_the_pipeline_and_the_cli_import_no_plotting_or_image_library(tmp_path):
     assert _loaded_after(code, tmp_path, PLOTTING) == set()
 
 
-def test_a_run_in_memory_loads_no_plotting_or_image_library(tmp_path):
-    code = """
+# three frames of a run in memory (no reader, no outputs)
+THREE_FRAMES = """
+import sys
 import numpy as np
 from torchratslam import RatSLAM, load_config
 
@@ -101,23 +102,21 @@ for _ in range(3):
     slam.step(rng.integers(0, 255, (120, 160), dtype=np.uint8), (0.1, 0.01, 0.1))
 assert slam.frame_index == 3, slam.frame_index
 """
-    assert _loaded_after(code, tmp_path, PLOTTING) == set()
+
+
+def test_a_run_in_memory_loads_no_plotting_or_image_library(tmp_path):
+    assert _loaded_after(THREE_FRAMES, tmp_path, PLOTTING) == set()
 
 
 def test_a_run_in_memory_loads_networkx_only_when_its_graph_is_read(tmp_path):
-    code = """
-import sys
-import numpy as np
-from torchratslam import RatSLAM, load_config
-
-slam = RatSLAM(load_config("irat"))
-rng = np.random.default_rng(0)
-for _ in range(3):
-    slam.step(rng.integers(0, 255, (120, 160), dtype=np.uint8), (0.1, 0.01, 0.1))
+    code = (
+        THREE_FRAMES
+        + """
 assert "networkx" not in sys.modules, "networkx loaded by a run that never read its graph"
 g = slam.experience_map.graph
 assert g.number_of_nodes() == len(slam.experience_map) > 0
 """
+    )
     assert _loaded_after(code, tmp_path, ("networkx",)) == {"networkx"}
 
 
