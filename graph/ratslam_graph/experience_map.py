@@ -43,7 +43,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from ratslam_graph import link_learning, queries, relaxation
+from ratslam_graph import frame_step, link_learning, queries, relaxation
 from ratslam_graph.errors import GraphError
 from ratslam_graph.experience_graph import ExperienceGraph
 from ratslam_graph.geometry import wrap_angle
@@ -202,11 +202,13 @@ class ExperienceMap:
             vrot: turn rate (rad/s, counter-clockwise).
             dt: interval (s).
         """
+        fs = self._fs  # the accumulators' array (see the slots above), read once
         step = vtrans * dt
-        self.accum_facing = wrap_angle(self.accum_facing + vrot * dt, include_pi=True)
-        self.accum_x += step * math.cos(self.accum_facing)
-        self.accum_y += step * math.sin(self.accum_facing)
-        self.accum_time += dt
+        facing = float(wrap_angle(fs.item(2) + vrot * dt, include_pi=True))
+        fs[2] = facing
+        fs[0] = fs.item(0) + step * math.cos(facing)
+        fs[1] = fs.item(1) + step * math.sin(facing)
+        fs[3] = fs.item(3) + dt
 
     def _measurement(self, src: int, relative_rad: float) -> tuple[float, float, float]:
         """The accumulated transition as a link of ``src``: ``(d, heading, facing)``."""
@@ -230,9 +232,7 @@ class ExperienceMap:
         :meth:`apply` and, if ``relax``, :meth:`iterate`; one compiled call when the
         settings allow it (:mod:`ratslam_graph.frame_step`), the same map bit for bit.
         """
-        from ratslam_graph.frame_step import run_frame
-
-        run_frame(
+        frame_step.run_frame(
             self,
             odometry,
             action,

@@ -22,17 +22,25 @@ def block_means(  # pragma: no cover - compiled
         img: ``(H, W, C)`` uint8 -> ``(ty, tx)`` float64.
     """
     nc = img.shape[2]
-    sums = np.zeros((ty, tx), np.int64)
-    for i in range(ty):
-        for r in range(y0 + i * by, y0 + (i + 1) * by):
-            for j in range(tx):
-                s = 0
-                for c in range(x0 + j * bx, x0 + (j + 1) * bx):
-                    for k in range(nc):
-                        s += img[r, c, k]
-                sums[i, j] += s
+    w = tx * bx
+    acc = np.empty(w * nc, np.int64)
     out = np.empty((ty, tx))
     for i in range(ty):
+        # the block row's pixels summed column by column (one long loop per image row),
+        # then each block's columns: the same integers as summing block by block
+        acc[:] = 0
+        for r in range(y0 + i * by, y0 + (i + 1) * by):
+            if nc == 1:
+                grey = img[r, x0 : x0 + w, 0]
+                for q in range(w):
+                    acc[q] += grey[q]
+            else:
+                row = img[r, x0 : x0 + w].ravel()  # a view of a C-contiguous image's row
+                for q in range(w * nc):
+                    acc[q] += row[q]
         for j in range(tx):
-            out[i, j] = sums[i, j] / scale
+            s = 0
+            for q in range(j * bx * nc, (j + 1) * bx * nc):
+                s += acc[q]
+            out[i, j] = s / scale
     return out

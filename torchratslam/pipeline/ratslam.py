@@ -53,6 +53,8 @@ def _has_injection_angle(pose_cells: object) -> bool:
 
 def _centre(pose_cells: PoseCellModule) -> tuple[float, float, float]:
     c = pose_cells.centre
+    if type(c) is tuple and len(c) == 3 and all(type(v) is float for v in c):
+        return c  # PoseCells' own centre: nothing to convert
     if callable(c):
         c = c()
     if isinstance(c, torch.Tensor):
@@ -215,7 +217,10 @@ class RatSLAM:
                     # OpenRatSLAM's get_relative_rad(): the angle of the last injection
                     inj = cast(InjectionAngle, pcs)
                     rad = inj.vt_delta_pc_th * 2.0 * math.pi / inj.dims[2]
-                    action = dataclasses.replace(action, relative_rad=rad)
+                    if type(action) is Action:  # (replace() costs as much as the rest)
+                        action = Action(action.kind, action.dest_id, action.src_id, rad)
+                    else:
+                        action = dataclasses.replace(action, relative_rad=rad)
             pc = _centre(pcs)
         return action, pc
 
@@ -238,9 +243,17 @@ class RatSLAM:
                 t=float(frame.t),
                 pc=pc,
                 template_id=int(view.template_id),
-                pc_dims=tuple(float(d) for d in self.config.pose_cells.dims),
+                pc_dims=self._pc_dims(),
                 behaviour=behaviour,
             )
+
+    def _pc_dims(self) -> tuple[float, ...]:
+        """The pose cells' ``(X, Y, TH)`` as floats, kept while the config is the same."""
+        pcp = self.config.pose_cells
+        cached = self.__dict__.get("_pc_dims_of")
+        if cached is None or cached[0] is not pcp:
+            cached = self.__dict__["_pc_dims_of"] = (pcp, tuple(float(d) for d in pcp.dims))
+        return cached[1]
 
     def _finish(
         self,

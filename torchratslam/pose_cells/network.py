@@ -397,6 +397,21 @@ class PoseCellNetwork(nn.Module):
         """
         b = self.batch_size
         n_x, n_y, n_t = self.dims
+        act = self._buffers["activity"]
+        assert act is not None
+        if (
+            self._numpy
+            and type(x) is int
+            and type(y) is int
+            and type(th) is int
+            and type(energy) is float
+            and act.device.type == "cpu"
+        ):  # one network, Python numbers (what PoseCells passes every frame): no arrays
+            if not math.isfinite(energy):
+                raise InputError(f"injected energy must be finite, got {energy}")
+            # a float64 scalar, as the arrays' path passes: the sum rounds as float64
+            self._np_engine.inject(act, th % n_t, y % n_y, x % n_x, np.float64(energy))
+            return
         ix = np.remainder(F.as_batch(x, b, "x", np.int64), n_x)
         iy = np.remainder(F.as_batch(y, b, "y", np.int64), n_y)
         it = np.remainder(F.as_batch(th, b, "th", np.int64), n_t)

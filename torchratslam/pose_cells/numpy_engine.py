@@ -54,6 +54,8 @@ class NumpyEngine:
         self._no_lookups = np.zeros((0, 0), dtype=np.float64)
         self._arcs: list[tuple[int, int]] | None = None
         self._arcs_key: tuple[int, int] | None = None
+        self._view: tuple[torch.Tensor, int, np.ndarray] | None = None
+        self._eh = max(params.pc_w_e_dim // 2, params.pc_w_e_dim - 1 - params.pc_w_e_dim // 2)
 
     # ------------------------------------------------------------ caches
     def retarget(self, dtype: torch.dtype) -> None:
@@ -65,6 +67,19 @@ class NumpyEngine:
     def invalidate(self) -> None:
         """Forget what was derived from the activity's contents (it was replaced)."""
         self._arcs = None
+        self._view = None
+
+    def _act_view(self, activity: torch.Tensor) -> np.ndarray:
+        """The first network of ``activity`` as a numpy view, made again when the buffer
+        (the tensor or its memory) is another one.
+
+        Shape:
+            activity: ``(1, TH, Y, X)``; returns ``(TH, Y, X)``.
+        """
+        view = self._view
+        if view is None or view[0] is not activity or view[1] != activity.data_ptr():
+            view = self._view = (activity, activity.data_ptr(), activity.detach().numpy()[0])
+        return view[2]
 
     def _arcs_of(self, activity: torch.Tensor, act: np.ndarray) -> list[tuple[int, int]]:
         key = (activity.data_ptr(), activity._version)
@@ -113,15 +128,12 @@ class NumpyEngine:
     # --------------------------------------------------------------- step
     def _box(self, arcs: list[tuple[int, int]], trans: float, rot: float) -> np.ndarray:
         """Per axis (th, y, x): the crop ``(start, length, whole ring)``, ``(3, 3)``."""
-        p = self.params
         n_x, n_y, n_t = self.dims
-        move_xy = math.ceil(abs(trans)) + 1 if trans != 0 else 0
-        move_th = math.ceil(abs(rot)) + 1 if rot != 0 else 0
-        eh = max(p.pc_w_e_dim // 2, p.pc_w_e_dim - 1 - p.pc_w_e_dim // 2)
+        eh = self._eh
+        m_xy = eh + (math.ceil(abs(trans)) + 1 if trans != 0 else 0)
+        m_th = eh + (math.ceil(abs(rot)) + 1 if rot != 0 else 0)
         box = []
-        for (start, ln), n, m in zip(
-            arcs, (n_t, n_y, n_x), (eh + move_th, eh + move_xy, eh + move_xy), strict=True
-        ):
+        for (start, ln), n, m in ((arcs[0], n_t, m_th), (arcs[1], n_y, m_xy), (arcs[2], n_x, m_xy)):
             if ln == 0:
                 raise InputError(
                     "pose-cell activity is all zero; reset() or inject() before stepping"
@@ -149,7 +161,7 @@ class NumpyEngine:
         """
         from torchratslam.pose_cells._step import step_crop
 
-        act = activity.detach().numpy()[0]
+        act = self._act_view(activity)
         box = self._box(self._arcs_of(activity, act), trans, rot)
         w_e, w_i, inhib = self._weights(act.dtype)
         coef, steps, edge, cells = self._tables(trans < 0)
@@ -173,9 +185,10 @@ class NumpyEngine:
         )
         if status:
             raise InputError(F.DIED_OUT)
-        self.last_crop = (int(box[0, 1]), int(box[1, 1]), int(box[2, 1]))
-        s_t, l_t, s_y, l_y, s_x, l_x = arcs.tolist()
-        self._arcs = [(s_t, l_t), (s_y, l_y), (s_x, l_x)]
+        l_t, l_y, l_x = box[:, 1].tolist()
+        self.last_crop = (l_t, l_y, l_x)
+        s_t, a_t, s_y, a_y, s_x, a_x = arcs.tolist()
+        self._arcs = [(s_t, a_t), (s_y, a_y), (s_x, a_x)]
         if dec.cpp_decode:
             return centre
         return dec.decode_one(act, peak)
@@ -192,7 +205,7 @@ class NumpyEngine:
         Shape:
             activity: ``(1, TH, Y, X)``.
         """
-        act = activity.detach().numpy()[0]
+        act = self._act_view(activity)
         key = (activity.data_ptr(), activity._version)
         act[th, y, x] += energy
         if energy != 0 and self._arcs is not None and self._arcs_key == key:

@@ -41,6 +41,14 @@ def _with_room(a: np.ndarray, n: int) -> np.ndarray:
     return out
 
 
+def _nearest() -> Any:
+    """:func:`~torchratslam.pose_cells._nearest.nearest_cell` (numba, imported on first
+    use)."""
+    from torchratslam.pose_cells._nearest import nearest_cell
+
+    return nearest_cell
+
+
 def _exp(x: float) -> float:
     """``exp(x)`` as C's: ``inf`` past the largest double, where Python raises (a
     template seen on every frame for long enough decays past it; OpenRatSLAM's energy
@@ -81,6 +89,7 @@ class PoseCells:
         self.params = params if params is not None else PoseCellParams()
         self.network = PoseCellNetwork(self.params, 1, dtype=dtype, device=device, method=method)
         self.dims = self.network.dims
+        self._dims_f = (float(self.dims[0]), float(self.dims[1]), float(self.dims[2]))
         self._clear()
 
     def _clear(self) -> None:
@@ -275,20 +284,23 @@ class PoseCells:
             self._e_pc[self.current_exp].tolist(), self._corrected_centre(), self.dims
         )
         if d_current > threshold or self.current_vt != self.prev_vt:
-            ids = np.asarray(exps, dtype=np.int64)
-            ids = ids[ids != self.current_exp]
-            if ids.size:
-                d = self._delta_pc(self.exp_pc[ids])
-                k = int(np.argmin(d))  # first minimum, as OpenRatSLAM's strict '<'
-                if d[k] < threshold:
-                    src = self.current_exp
-                    self.current_exp = int(ids[k])
-                    return Action(
-                        ActionKind.LINK,
-                        dest_id=self.current_exp,
-                        src_id=src,
-                        relative_rad=self.relative_rad,
-                    )
+            # the first nearest, as OpenRatSLAM's strict '<' (pc_distance's arithmetic)
+            k, d = _nearest()(
+                self._e_pc,
+                np.array(exps, dtype=np.int64),
+                self.current_exp,
+                self._corrected_centre(),
+                self._dims_f,
+            )
+            if k >= 0 and d < threshold:
+                src = self.current_exp
+                self.current_exp = int(k)
+                return Action(
+                    ActionKind.LINK,
+                    dest_id=self.current_exp,
+                    src_id=src,
+                    relative_rad=self.relative_rad,
+                )
             return self._create()
         return Action.none()
 

@@ -713,3 +713,52 @@ def test_a_template_seen_for_ever_stops_injecting_without_overflowing():
     before = pc.activity.clone()
     pc.on_view_template(ViewMatch(0))  # overflows in Python's math.exp, not here
     assert torch.equal(pc.activity, before)
+
+
+@pytest.mark.parametrize("dtype", [torch.float32, F64])
+def test_inject_with_python_numbers_adds_as_the_arrays_path(dtype):
+    # PoseCells passes Python ints and a float (no arrays); the cell must get the same
+    # bits as through one-element arrays: the sum rounded as float64, then to the dtype
+    p = PoseCellParams()
+    nets = [PoseCellNetwork(p, dtype=dtype, method="numpy") for _ in range(3)]
+    for n in nets:  # float32 rounds 1 + 2**-24 + 2**-50 up; 1 + float32(that energy) ties to 1
+        with torch.no_grad():
+            n.activity[0, 1, 2, 3] = 1.0
+    nets[0].inject(3, 2, 1, 2.0**-24 + 2.0**-50)
+    nets[1].inject(np.array([3]), np.array([2]), np.array([1]), np.array([2.0**-24 + 2.0**-50]))
+    with torch.no_grad():
+        nets[2].activity[0, 1, 2, 3] = 1.0 + 2.0**-24 + 2.0**-50
+    assert nets[0].activity[0, 1, 2, 3] == nets[2].activity[0, 1, 2, 3] > 1.0
+    rng = np.random.default_rng(7)
+    for _ in range(40):
+        x, y, th = (int(v) for v in rng.integers(-50, 80, 3))
+        e = float(rng.random() * 1e-3)
+        nets[0].inject(x, y, th, e)
+        nets[1].inject(np.array([x]), np.array([y]), np.array([th]), np.array([e]))
+        cell = (0, th % p.pc_dim_th, y % p.pc_dim_xy, x % p.pc_dim_xy)  # the rule, here
+        a = nets[2].activity
+        with torch.no_grad():  # (through torch: the crop's cache sees the write)
+            a[cell] = float(np.float64(a[cell].item()) + np.float64(e))
+        nets[0].step(0.3, 0.1, 1.0)  # the crop's cache must know the new cells
+        nets[1].step(0.3, 0.1, 1.0)
+        nets[2].step(0.3, 0.1, 1.0)
+    for n in nets[1:]:
+        assert torch.equal(nets[0].activity, n.activity)
+        assert torch.equal(nets[0].best, n.best)
+    for bad in (math.nan, math.inf):
+        for args in ((1, 2, 3, bad), (np.array([1]), np.array([2]), np.array([3]), bad)):
+            with pytest.raises(InputError, match="finite"):
+                nets[0].inject(*args)
+
+
+def test_a_step_reads_the_buffer_it_is_given_after_data_is_replaced():
+    # the numpy path keeps a view of the buffer's memory: new memory, a new view
+    p = PoseCellParams()
+    net, ref = (PoseCellNetwork(p, dtype=F64, method="numpy") for _ in range(2))
+    net.step(0.3, 0.1, 1.0)
+    other = torch.zeros_like(net.activity)
+    other[0, 5, 6, 7] = 1.0
+    net.activity.data = other.clone()  # the same tensor object, other memory
+    ref.set_activity(other)
+    assert torch.equal(net.step(0.2, -0.1, 1.0), ref.step(0.2, -0.1, 1.0))
+    assert torch.equal(net.activity, ref.activity)
