@@ -1,10 +1,11 @@
 """One network's pose-cell step on the packet's crop, compiled with numba (imported lazily).
 
 :func:`step_crop` does in one call what :class:`~torchratslam.pose_cells.numpy_engine.NumpyEngine`
-describes: gather the crop, excite and inhibit (:func:`~torchratslam.pose_cells._taps.conv3`),
-global inhibition, clamp, normalise, path integration (OpenRatSLAM's arithmetic, with its
-edge loss), the theta shift, scatter back, the new non-zero arcs, the most active cell and
-OpenRatSLAM's ``find_best`` around it. Every operation keeps the order and the dtype of the
+describes: gather the crop, excite and inhibit (:func:`~torchratslam.pose_cells._taps.conv3_box`,
+on the box of cells that can be non-zero), global inhibition, clamp, normalise, path
+integration (OpenRatSLAM's arithmetic, with its edge loss), the theta shift, scatter
+back, the new non-zero arcs, the most active cell and OpenRatSLAM's ``find_best`` around
+it. Every operation keeps the order and the dtype of the
 numpy it stands for, so the bits are numpy's:
 
 * a sum over an array is numpy's pairwise summation (:func:`pairwise_sum`: eight
@@ -24,7 +25,7 @@ import math
 import numpy as np
 
 from ratslam_graph._jit import njit_cached
-from torchratslam.pose_cells._taps import conv3
+from torchratslam.pose_cells._taps import conv3_box
 
 __all__ = ["find_best", "minimal_arc", "pairwise_sum", "step_crop", "total"]
 
@@ -324,14 +325,30 @@ def step_crop(
     it, iy, ix = idx[0], idx[1], idx[2]
     t, y, x = it.size, iy.size, ix.size
     crop = np.empty((t, y, x), act.dtype)
+    nz = np.zeros((3, 2), np.int64)  # per axis, [lo, hi) holding the crop's non-zero cells
+    nz[:, 0] = (t, y, x)
     for k in range(t):
         for j in range(y):
             row, dst = act[it[k], iy[j]], crop[k, j]
+            lo, hi = x, 0
             for i in range(x):
-                dst[i] = row[ix[i]]
+                q = row[ix[i]]
+                dst[i] = q
+                if q != 0:
+                    lo = min(lo, i)
+                    hi = i + 1
+            if hi > 0:
+                nz[0, 0] = min(nz[0, 0], k)
+                nz[0, 1] = k + 1
+                nz[1, 0] = min(nz[1, 0], j)
+                nz[1, 1] = max(nz[1, 1], j + 1)
+                nz[2, 0] = min(nz[2, 0], lo)
+                nz[2, 1] = max(nz[2, 1], hi)
     circ_t, circ_y, circ_x = box[0, 2] != 0, box[1, 2] != 0, box[2, 2] != 0
-    e = conv3(crop, w_e, circ_t, circ_y, circ_x)
-    a = conv3(e, w_i, circ_t, circ_y, circ_x)
+    # the excitation and the inhibition on the cells that can be non-zero (the same bits
+    # as on the whole crop: conv3_box)
+    e, e_nz = conv3_box(crop, w_e, circ_t, circ_y, circ_x, nz)
+    a, _ = conv3_box(e, w_i, circ_t, circ_y, circ_x, e_nz)
     fa = a.reshape(t * y * x)
     fe = e.reshape(t * y * x)
     for p in range(fa.size):

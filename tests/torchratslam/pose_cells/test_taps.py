@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from torchratslam.pose_cells import functional as F
-from torchratslam.pose_cells._taps import conv3
+from torchratslam.pose_cells._taps import conv3, conv3_box
 
 
 def brute_axis(a: np.ndarray, w: np.ndarray, axis: int, circular: bool) -> np.ndarray:
@@ -59,3 +59,32 @@ def test_conv3_is_the_ring_matrix_convolution():
     mats = [F.ring_matrix(kern, n, c) for n, c in zip(a.shape, circ, strict=True)]
     want = np.einsum("ti,yj,xk,ijk->tyx", *mats, a)
     np.testing.assert_allclose(conv3(a, kern, *circ), want, rtol=1e-13, atol=0)
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_conv3_box_skips_only_zeros(dtype):
+    # an input that is zero outside a box (values of both signs inside, as OpenRatSLAM's
+    # one-cell path integration leaves them): the same bits as the whole array's loop,
+    # signs of zero included, and the returned box holds every non-zero cell
+    rng = np.random.default_rng(21)
+    for trial in range(120):
+        shape = tuple(int(v) for v in rng.integers(2, 12, 3))
+        circ = tuple(bool(v) for v in rng.integers(0, 2, 3))
+        w = F.gaussian_kernel_1d((7, 5, 4, 3)[trial % 4], 1.5).astype(dtype)
+        lo = [int(rng.integers(0, s)) for s in shape]
+        hi = [int(rng.integers(a, s + 1)) for a, s in zip(lo, shape, strict=True)]
+        inside = tuple(slice(a, b) for a, b in zip(lo, hi, strict=True))
+        a = np.zeros(shape, dtype)
+        a[inside] = rng.uniform(-0.3, 1.0, a[inside].shape)
+        a[np.abs(a) < 0.3] = 0
+        want = a
+        for axis in (2, 1, 0):
+            want = brute_axis(want, w, axis, circ[axis])
+        got, box = conv3_box(a, w, *circ, np.array([lo, hi], np.int64).T.copy())
+        assert got.dtype == dtype
+        assert np.array_equal(got, want) and np.array_equal(np.signbit(got), np.signbit(want))
+        nz = np.argwhere(got != 0)
+        if len(nz):
+            assert (nz.min(0) >= box[:, 0]).all() and (nz.max(0) < box[:, 1]).all()
+        else:
+            assert not a.any() or not want.any()
