@@ -287,8 +287,10 @@ def step_crop(
 
     Args:
         act: the activity (written unless it died out).
-        box: per axis (th, y, x) the crop's ``start``, ``length`` and whether it is the
-            whole ring (1) or not (0).
+        box: per axis (th, y, x) the crop's ``start``, ``length``, whether it is the
+            whole ring (1) or not (0), and ``[lo, hi)`` in the crop holding every
+            non-zero cell of ``act`` (the packet's arcs: outside them the convolutions
+            skip zeros).
         w_e, w_i: the excitatory and inhibitory 1D kernels in ``act``'s dtype.
         inhib: ``pc_global_inhib`` in ``act``'s dtype.
         trans: translation in cells along each layer's heading.
@@ -311,7 +313,7 @@ def step_crop(
         ``(x, y, th)`` (zeros without lookups).
 
     Shape:
-        act: ``(TH, Y, X)``; box: ``(3, 3)``; coef, steps: ``(2, TH)``; edge: ``(2, TH)``
+        act: ``(TH, Y, X)``; box: ``(3, 5)``; coef, steps: ``(2, TH)``; edge: ``(2, TH)``
         or ``(0, 0)``; cells: ``(TH, 3, 2)``; lookups: ``(6, n)`` or ``(0, 0)``.
     """
     dims = act.shape
@@ -325,29 +327,15 @@ def step_crop(
     it, iy, ix = idx[0], idx[1], idx[2]
     t, y, x = it.size, iy.size, ix.size
     crop = np.empty((t, y, x), act.dtype)
-    nz = np.zeros((3, 2), np.int64)  # per axis, [lo, hi) holding the crop's non-zero cells
-    nz[:, 0] = (t, y, x)
     for k in range(t):
         for j in range(y):
             row, dst = act[it[k], iy[j]], crop[k, j]
-            lo, hi = x, 0
             for i in range(x):
-                q = row[ix[i]]
-                dst[i] = q
-                if q != 0:
-                    lo = min(lo, i)
-                    hi = i + 1
-            if hi > 0:
-                nz[0, 0] = min(nz[0, 0], k)
-                nz[0, 1] = k + 1
-                nz[1, 0] = min(nz[1, 0], j)
-                nz[1, 1] = max(nz[1, 1], j + 1)
-                nz[2, 0] = min(nz[2, 0], lo)
-                nz[2, 1] = max(nz[2, 1], hi)
+                dst[i] = row[ix[i]]
     circ_t, circ_y, circ_x = box[0, 2] != 0, box[1, 2] != 0, box[2, 2] != 0
     # the excitation and the inhibition on the cells that can be non-zero (the same bits
     # as on the whole crop: conv3_box)
-    e, e_nz = conv3_box(crop, w_e, circ_t, circ_y, circ_x, nz)
+    e, e_nz = conv3_box(crop, w_e, circ_t, circ_y, circ_x, box[:, 3:5].copy())
     a, _ = conv3_box(e, w_i, circ_t, circ_y, circ_x, e_nz)
     fa = a.reshape(t * y * x)
     fe = e.reshape(t * y * x)

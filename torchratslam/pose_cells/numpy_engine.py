@@ -127,7 +127,8 @@ class NumpyEngine:
 
     # --------------------------------------------------------------- step
     def _box(self, arcs: list[tuple[int, int]], trans: float, rot: float) -> np.ndarray:
-        """Per axis (th, y, x): the crop ``(start, length, whole ring)``, ``(3, 3)``."""
+        """Per axis (th, y, x): the crop ``(start, length, whole ring)`` and the cells of
+        the crop the arcs hold ``(lo, hi)``, ``(3, 5)``."""
         n_x, n_y, n_t = self.dims
         eh = self._eh
         m_xy = eh + (math.ceil(abs(trans)) + 1 if trans != 0 else 0)
@@ -138,7 +139,12 @@ class NumpyEngine:
                 raise InputError(
                     "pose-cell activity is all zero; reset() or inject() before stepping"
                 )
-            box.append((0, n, 1) if ln + 2 * m >= n else ((start - m) % n, ln + 2 * m, 0))
+            if ln + 2 * m < n:
+                box.append(((start - m) % n, ln + 2 * m, 0, m, m + ln))
+            elif start + ln <= n:  # the whole ring, the arc not across its end
+                box.append((0, n, 1, start, start + ln))
+            else:
+                box.append((0, n, 1, 0, n))
         return np.array(box, dtype=np.int64)
 
     def step(self, activity: torch.Tensor, trans: float, rot: float) -> tuple[float, float, float]:
