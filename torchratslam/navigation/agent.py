@@ -43,6 +43,7 @@ from torchratslam.navigation.params import NavParams
 from torchratslam.navigation.planner import (
     Plan,
     arbitrate,
+    back_steps,
     local_options,
     map_pose,
     plan_route,
@@ -187,7 +188,8 @@ class NavigationAgent:
         or ``plan``'s fresh one.
 
         The part of ``old`` still intact (each step a link the way it was driven, or,
-        with ``junction_turns``, a turn onto a crossing way within ``overlap_m``) is
+        with ``junction_turns``, a turn onto a crossing way within ``overlap_m``, with
+        ``back_step_m``, a short link followed against its way) is
         rejoined at its node the robot reaches soonest (``plan``'s temporal map, whose
         way there is taken) and followed on by its own times. The fresh route
         wins when it is faster by ``route_keep_s`` or more, or when nothing of ``old``
@@ -206,6 +208,9 @@ class NavigationAgent:
         ok = (a == b) | np.isin(a * (n + 1) + b, keys)
         if self.params.turn_back:  # a link followed against its way
             ok |= np.isin(b * (n + 1) + a, keys)
+        if self.params.back_step_m > 0:  # a short link against its way (planner.back_steps)
+            short = back_steps(store, store.pose, self.params.back_step_m, np.pi / 4)
+            ok |= np.isin(b * (n + 1) + a, keys[short])
         if self.params.junction_turns:  # a turn onto a crossing way (planner.turn_pairs)
             gap = np.hypot(*(store.pose[a, :2] - store.pose[b, :2]).T)
             rot = np.abs(wrap_angle(store.pose[a, 2] - store.pose[b, 2]))
@@ -272,6 +277,7 @@ class NavigationAgent:
                     turns=p.junction_turns,
                     turn_back=p.turn_back,
                     goal_place=self.goal_place(goal) if p.turn_back and p.arrive_at_place else None,
+                    back_step_m=p.back_step_m,
                 )
                 ms.append(plan.ms)
                 route = plan.route

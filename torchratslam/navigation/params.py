@@ -71,6 +71,14 @@ class NavParams:
             experiences near the goal facing other ways, whose view is not the goal's.
             False: a route leads on only the way each link was driven (from a place
             driven one way only, round a loop or to where the robot once turned around).
+        back_step_m: above 0: a route may also follow a link of at most this length
+            (m, its odometric length) between two experiences facing the same way
+            (within 45 degrees) against its way (``plan_route(..., back_step_m=...)``),
+            never two such steps (nor a step and a junction turn) in a row. An
+            experience learnt a few centimetres behind the current one is linked from
+            it backwards, and the transition the robot then drove (the other way) is
+            never learnt, a pair being linked once: a chain of driven links ends there
+            although the robot drove on, and a route along it is lost. 0: off.
     """
 
     lookahead_m: float = 3.0
@@ -90,6 +98,7 @@ class NavParams:
     overlap_m: float = 1.0
     junction_turns: bool = False
     turn_back: bool = False
+    back_step_m: float = 0.0
 
     def __post_init__(self) -> None:
         for name in (
@@ -102,6 +111,8 @@ class NavParams:
         ):
             if not getattr(self, name) > 0:
                 raise ConfigError(f"NavParams.{name}={getattr(self, name)} must be > 0")
+        if not self.back_step_m >= 0:
+            raise ConfigError(f"NavParams.back_step_m={self.back_step_m} must be >= 0")
         if not self.route_keep_s >= 0:
             raise ConfigError(f"NavParams.route_keep_s={self.route_keep_s} must be >= 0")
         if self.arrive_links < 0:

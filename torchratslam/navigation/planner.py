@@ -20,6 +20,7 @@ from __future__ import annotations
 import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -36,6 +37,7 @@ from torchratslam.sim.office.motion import Behaviour, options
 __all__ = [
     "Plan",
     "arbitrate",
+    "back_steps",
     "local_options",
     "map_pose",
     "plan_route",
@@ -73,6 +75,7 @@ def plan_route(
     min_step_m: float = 0.05,
     turn_back: bool = False,
     goal_place: np.ndarray | None = None,
+    back_step_m: float = 0.0,
 ) -> Plan:
     """The temporal map from the robot's place and the route to ``goal``.
 
@@ -117,6 +120,16 @@ def plan_route(
             ``radius_m`` of the goal experience in the map; the goal experience always):
             the navigator's arrival rule's goal place. None: every experience within
             ``radius_m`` of the goal experience.
+        back_step_m: above 0: a route may also follow, against its way, a link no
+            longer than ``back_step_m`` (its odometric length) between two experiences
+            facing the same way (within ``min_turn``), at the link's time. Such a link
+            joins two representations of one place: an experience learnt a few
+            centimetres behind the current one is linked from it, backwards, and the
+            transition the robot then drove the other way is never learnt (a pair is
+            linked once), so the chain of driven links ends there although the robot
+            drove on. The step lands on the second layer, as a turn does, so two steps
+            (or a step and a turn) never follow each other and no corridor is walked
+            backwards a link at a time.
     """
     links = em.store
     n, e = links.n, links.e
@@ -136,22 +149,30 @@ def plan_route(
     w = links.link[:e, 3]
     if not directed:
         s, g, w = np.concatenate([s, g]), np.concatenate([g, s]), np.concatenate([w, w])
-    layers = 2 if turns else 1
-    if turns:  # a turn from one representation of a place onto another
-        step = links.link[:e, 0] >= min_step_m
-        moving = np.zeros(n, dtype=bool)
-        moving[links.src[:e][step]] = True
-        moving[links.dst[:e][step]] = True
-        a, b = turn_pairs(poses[:n], radius_m, min_turn, moving)
-        gap = np.hypot(*(poses[a, :2] - poses[b, :2]).T)
-        rot = np.abs(wrap_angle(poses[a, 2] - poses[b, 2]))
+    layers = 2 if turns or back_step_m > 0 else 1
+    if layers == 2:  # a turn (or a step) from one representation of a place onto another
+        if turns:
+            step = links.link[:e, 0] >= min_step_m
+            moving = np.zeros(n, dtype=bool)
+            moving[links.src[:e][step]] = True
+            moving[links.dst[:e][step]] = True
+            a, b = turn_pairs(poses[:n], radius_m, min_turn, moving)
+        else:
+            a = b = np.zeros(0, np.int64)
+        w_ab = np.hypot(*(poses[a, :2] - poses[b, :2]).T) / speed
+        w_ab += np.abs(wrap_angle(poses[a, 2] - poses[b, 2])) / turn_rate
+        if back_step_m > 0:  # a short link between one place's representations, backwards
+            short = back_steps(links, poses, back_step_m, min_turn)
+            a = np.concatenate([a, links.dst[:e][short]])
+            b = np.concatenate([b, links.src[:e][short]])
+            w_ab = np.concatenate([w_ab, links.link[:e, 3][short]])
         # a turn lands on the second layer (n + j), which leads on by j's links only:
         # a route never turns twice in a row (never skips along a corridor by turning
         # round and back)
         s, g, w = (
             np.concatenate([s, s + n, a]),
             np.concatenate([g, g, b + n]),
-            np.concatenate([w, w, gap / speed + rot / turn_rate]),
+            np.concatenate([w, w, w_ab]),
         )
         seeds = near + n  # the start is itself a turn onto the robot's place
         goals = np.concatenate([at_goal, at_goal + n])
@@ -257,6 +278,21 @@ def turn_pairs(
     if moving is not None:
         keep &= moving[a] & moving[b]
     return a[keep], b[keep]
+
+
+def back_steps(links: Any, poses: np.ndarray, max_m: float, min_turn: float) -> np.ndarray:
+    """Which links may be followed against their way (``plan_route(...,
+    back_step_m=max_m)``): those no longer than ``max_m`` (their odometric length)
+    between experiences whose headings differ by ``min_turn`` rad or less.
+
+    Shape:
+        links: an experience map's link store (``src``, ``dst``, ``link``, ``e``);
+        poses: (N, 3). Returns (E,) bool.
+    """
+    e = links.e
+    src, dst = links.src[:e].astype(np.int64), links.dst[:e].astype(np.int64)
+    rot = np.abs(wrap_angle(poses[src, 2] - poses[dst, 2]))
+    return np.asarray((links.link[:e, 0] <= max_m) & (rot <= min_turn), dtype=bool)
 
 
 def map_pose(em: ExperienceMap) -> np.ndarray:

@@ -153,3 +153,41 @@ def test_a_route_back_along_links_counts_as_intact_for_route_hysteresis():
     # read as links the way they were driven, those steps are broken: the fresh route
     off = _agent(em, turn_back=False, route_keep_s=5.0).keep_route(followed, fresh)
     assert off.ids != followed.ids and loop[0] in off.ids
+
+
+def test_a_short_link_followed_back_counts_as_intact_for_route_hysteresis():
+    # east along y = 0 with d learnt 7 cm behind c[0] (linked c[0] -> d); a loop round
+    # (north) is the other way to the goal
+    em = ExperienceMap(ExperienceMapParams(exp_initial_em_deg=0.0, exp_link_time="per_link"))
+    add = em.store.add_experience
+    w = [add(x, 0.0, 0.0) for x in (0.0, 0.5, 1.0)]
+    d = add(1.43, 0.0, 0.0)
+    c = [add(x, 0.0, 0.0) for x in (1.5, 2.0, 2.5, 3.0)]
+    for a, b in itertools.pairwise([*w, d]):
+        em.store.add_link(a, b, 0.5, 0.0, 0.0, 1.0)
+    em.store.add_link(c[0], d, 0.07, np.pi, 0.0, 0.2)
+    for a, b in itertools.pairwise(c):
+        em.store.add_link(a, b, 0.5, 0.0, 0.0, 1.0)
+    up = [add(1.0, 2.0, 0.0), add(3.0, 2.0, -np.pi / 2)]
+    em.store.add_link(w[0], up[0], 2.2, 0.0, 0.0, 1.5)
+    em.store.add_link(up[0], up[1], 2.0, 0.0, 0.0, 2.0)
+    k = em.store.link_index(up[0], up[1])
+    em.store.add_link(up[1], c[-1], 2.0, 0.0, 0.0, 1.5)
+    _at(em, w[0])
+    em.store.link[k, 3] += 10.0  # the loop was slow when the route was planned
+    followed = plan_route(em, c[-1], radius_m=0.3, back_step_m=0.1).route
+    em.store.link[k, 3] -= 10.0
+    assert followed is not None and followed.ids == [*w, d, *c]
+    fresh = plan_route(em, c[-1], radius_m=0.3, back_step_m=0.1)
+    assert fresh.route is not None and fresh.route.ids == [w[0], *up, c[-1]]  # 5 s against 6.2 s
+    kept = _agent(em, back_step_m=0.1, route_keep_s=5.0).keep_route(followed, fresh)
+    assert kept.ids == followed.ids  # the step d -> c[0] is intact
+    # without the steps the followed route is broken at d: only its end is rejoined
+    plain = plan_route(em, c[-1], radius_m=0.3)
+    off = _agent(em, route_keep_s=5.0).keep_route(followed, plain)
+    assert off.ids == [w[0], *up, c[-1]]
+
+
+def test_back_step_must_not_be_negative():
+    with pytest.raises(ConfigError):
+        NavParams(back_step_m=-0.1)

@@ -9,7 +9,13 @@ from ratslam_graph.experience_map import ExperienceMap
 from ratslam_graph.geometry import wrap_angle
 from ratslam_graph.params import ExperienceMapParams
 from torchratslam.navigation.labels import LabelState, next_label
-from torchratslam.navigation.planner import arbitrate, plan_route, to_map_frame, turn_pairs
+from torchratslam.navigation.planner import (
+    arbitrate,
+    back_steps,
+    plan_route,
+    to_map_frame,
+    turn_pairs,
+)
 from torchratslam.sim.office.motion import Behaviour
 
 
@@ -204,3 +210,52 @@ def test_a_route_turns_back_along_links_driven_the_other_way():
     em.set_current(east[0])
     fwd = plan_route(em, east[-1], turn_back=True)
     assert fwd.route is not None and fwd.route.ids == plan_route(em, east[-1]).route.ids
+
+
+def test_a_route_steps_past_an_experience_learnt_behind_the_current_one():
+    # driven east along y = 0: experience d was learnt 7 cm behind c[0] while c[0] was
+    # current, so the pair's one link runs c[0] -> d (backwards); every later pass went
+    # ... -> w[-1] -> d -> c[0] -> ..., and d -> c[0] was never learnt (a pair is linked
+    # once): the driven links from the west end at d
+    em = ExperienceMap(ExperienceMapParams(exp_initial_em_deg=0.0, exp_link_time="per_link"))
+    w = _chain(em, np.c_[[0.0, 0.5, 1.0], np.zeros(3)], 0.0)
+    c = _chain(em, np.c_[[1.5, 2.0, 2.5, 3.0, 3.5], np.zeros(5)], 0.0)
+    d = em.store.add_experience(1.43, 0.0, 0.0)
+    em.store.add_link(c[0], d, 0.07, np.pi, 0.0, 0.2)
+    em.store.add_link(w[-1], d, 0.43, 0.0, 0.0, 0.86)
+    em.set_current(w[0])
+    for turns in (False, True):
+        assert plan_route(em, c[-1], radius_m=0.3, turns=turns).route is None
+        plan = plan_route(em, c[-1], radius_m=0.3, turns=turns, back_step_m=0.1)
+        assert plan.route is not None
+        assert plan.route.ids == [*w, d, *c]  # c[0] -> d followed back, d onto c[0]
+        # the links' times: w's two, w[-1] -> d, c[0] -> d (backwards), c's four
+        assert plan.route.total_time == pytest.approx(2.0 + 0.86 + 0.2 + 4.0)
+    assert plan_route(em, c[-1], radius_m=0.3, back_step_m=0.05).route is None  # too long
+
+
+def test_back_steps_are_short_links_between_experiences_facing_one_way():
+    rng = np.random.default_rng(11)
+    em = ExperienceMap(ExperienceMapParams(exp_initial_em_deg=0.0, exp_link_time="per_link"))
+    for x, y, th in np.c_[rng.uniform(0, 3, (60, 2)), rng.uniform(-np.pi, np.pi, 60)]:
+        em.store.add_experience(float(x), float(y), float(th))
+    for a, b in rng.integers(0, 60, (120, 2)):
+        if a != b:
+            em.store.add_link(int(a), int(b), float(rng.uniform(0, 0.3)), 0.0, 0.0, 1.0)
+    got = back_steps(em.store, em.poses, 0.1, np.pi / 4)
+    st = em.store
+    for k in range(st.e):  # one link at a time
+        rot = abs(wrap_angle(em.poses[st.src[k], 2] - em.poses[st.dst[k], 2]))
+        assert got[k] == (st.link[k, 0] <= 0.1 and rot <= np.pi / 4)
+    assert 0 < got.sum() < st.e
+
+
+def test_no_route_walks_back_along_a_chain_of_short_links():
+    # a corridor driven west only, in links of 7 cm: followed against their way one at a
+    # time (each lands where only links the way they were driven lead on), they never
+    # take a route east
+    em = ExperienceMap(ExperienceMapParams(exp_initial_em_deg=0.0, exp_link_time="per_link"))
+    west = _chain(em, np.c_[np.arange(2.0, -0.01, -0.07), np.zeros(29)], np.pi)
+    em.set_current(west[-1])  # at the west end, x = 0.04
+    assert plan_route(em, west[0], radius_m=0.2, back_step_m=0.1, turns=True).route is None
+    assert plan_route(em, west[0], radius_m=0.2, directed=False).route is not None

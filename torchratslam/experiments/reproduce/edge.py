@@ -61,6 +61,12 @@ experience and follow links back against the way they were driven (the paper's l
 traversable both ways), ending at the goal's place. edge/adaptation keeps routes along
 the links' own way (a blocked link is deleted for the way it was driven only)."""
 
+ADAPT_NAV = NavParams(junction_turns=True, back_step_m=0.1)
+"""The adaptation navigator: routes may turn at junctions onto another representation
+(``junction_turns``) and follow a link of up to 10 cm between experiences facing one way
+against its way (``back_step_m``: an experience learnt just behind the current one is
+linked backwards, and the chain of driven links ends there)."""
+
 # a deleted link counts as near the obstacle when one of its experiences was learnt
 # within this distance (m) of the obstacle's centre
 NEAR_OBSTACLE_M = 3.0
@@ -424,7 +430,7 @@ def _adapt(
     """The three trials with one experience map: ``(trials, totals, figure names)``."""
     _, dims = s.matrices[0]
     robot = MappingRobot(_config(dims, keys), office=office, seed=ctx.seed)
-    agent = NavigationAgent(robot, NavParams(junction_turns=True))
+    agent = NavigationAgent(robot, ADAPT_NAV)
     robot.explore(s.adapt_explore_s)
     while True:
         try:
@@ -561,7 +567,11 @@ def _adaptation(ctx: ExperimentContext) -> Report:
         "way; never two turns in a row, never a turn-around), so a blocked corridor is not "
         "bypassed by turning; arbitration compares the local paths with the route's shape "
         "from the robot on (each turn closed up), as the map can hold a junction's "
-        "representations metres apart.",
+        "representations metres apart. A route may also follow a link of up to "
+        f"{ADAPT_NAV.back_step_m * 100:g} cm between two experiences facing the same way "
+        "against its way (never twice in a row): where an experience was learnt just behind "
+        "the current one, the pair's one link runs backwards and the transition driven the "
+        "other way is never learnt, so the chain of driven links would end there.",
         f"The robot explores the unmodified floor for {s.adapt_explore_s / 60:g} minutes before "
         "the obstacle is placed (the paper's robot: about twenty). Before every trial it is "
         "steered back to the start the shortest way round the obstacle (ground truth, as by "

@@ -59,3 +59,18 @@ def test_adaptation_quick_behaves_as_the_paper_reports(tmp_path):
     # trial 3: obstacle removed, path driven again: the short route
     assert t3["reached"] and t3["route"] == "short"
     assert t3["path_m"] < t1["path_m"]
+
+
+def test_the_adaptation_navigator_s_options_stay_out_of_goal_recall():
+    # goal recall's unseen-seed result was measured without them
+    from dataclasses import fields
+
+    from torchratslam.experiments.reproduce.edge import ADAPT_NAV, RECALL_NAV
+    from torchratslam.navigation.params import NavParams
+
+    default = NavParams()
+    assert ADAPT_NAV.back_step_m > 0 and ADAPT_NAV.junction_turns
+    changed = {
+        f.name for f in fields(NavParams) if getattr(RECALL_NAV, f.name) != getattr(default, f.name)
+    }
+    assert changed == {"turn_back"}
