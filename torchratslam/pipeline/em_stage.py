@@ -4,16 +4,15 @@
 experience map each frame: one compiled call (``step_frame``) where the module has it and
 the pose cells' action stands, else odometry, the action (the experience map's own
 under ``exp_create_rule="activity"``, Eqs. 1-4) and the relaxation, one by one. An
-:class:`~ratslam_graph.experience_map.ExperienceMap` that keeps the class's own frame is
-driven without the layers between (:func:`ratslam_graph.frame_step.run_frame` directly;
-a frame without action or relaxation is its odometry alone, about half of OpenRatSLAM's
-frames): the same operations through fewer Python calls.
+:class:`~ratslam_graph.experience_map.ExperienceMap` that keeps the class's own frame
+takes a frame without action or relaxation (about half of OpenRatSLAM's frames) as its
+odometry alone, without the layers between: what its ``step_frame`` would do.
 """
 
 from __future__ import annotations
 
 from ratslam_graph.experience_map import ExperienceMap
-from ratslam_graph.frame_step import compiled_frame, run_frame
+from ratslam_graph.frame_step import compiled_frame
 from ratslam_graph.messages import Action, ActionKind
 from torchratslam.protocols import ExperienceMapModule
 
@@ -51,24 +50,14 @@ def experience_map_step(
     activity = getattr(params, "exp_create_rule", "pc_distance") == "activity"
     relax = relax_every or action.kind != ActionKind.NONE
     if (
-        not activity
+        not relax
+        and odo is not None
+        and not activity
         and isinstance(em, ExperienceMap)
         and type(em).step_frame is ExperienceMap.step_frame
-    ):  # the map's own frame, without the layers between (what step_frame does)
-        if not relax and odo is not None and compiled_frame(em):
-            em.on_odometry(*odo)  # no action, no relaxation: the odometry is the frame
-        else:
-            run_frame(
-                em,
-                odo,
-                action,
-                frame=frame,
-                t=t,
-                pc=pc,
-                template_id=template_id,
-                behaviour=0 if behaviour is None else int(behaviour),
-                relax=relax,
-            )
+        and compiled_frame(em)
+    ):  # no action, no relaxation: the odometry is the frame (what step_frame does)
+        em.on_odometry(*odo)
         return em._ist.item(0)  # current_id
     extra = {} if behaviour is None else {"behaviour": int(behaviour)}
     step = getattr(em, "step_frame", None)
