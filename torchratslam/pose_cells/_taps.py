@@ -29,58 +29,6 @@ def _add(  # pragma: no cover - compiled
         o[i] = o[i] + wj * v[i]
 
 
-@njit_cached(nogil=True)
-def conv_axis(  # pragma: no cover - compiled
-    a: np.ndarray, w: np.ndarray, outer: int, n: int, inner: int, circular: bool
-) -> np.ndarray:
-    """One axis of the convolution on ``a`` seen as ``(outer, n, inner)``.
-
-    ``out[o, p, q] = sum_j w[j] * a[o, p + h - j, q]`` (``h = len(w) // 2``), the taps
-    added in the order of ``j``; indices wrap when ``circular``, else the array is zero
-    outside ``0 .. n - 1`` (the taps that fall outside are skipped: adding a zero
-    product changes no non-negative sum).
-
-    Shape:
-        a: flat ``(outer * n * inner,)``; w: ``(K,)``; returns the same as ``a``.
-    """
-    out = np.zeros_like(a)
-    h = w.size // 2
-    for o in range(outer):
-        base = o * n * inner
-        for j in range(w.size):
-            wj = w[j]
-            s = h - j  # out[p] takes a[p + s]
-            if circular:
-                s = s % n
-                # p in [0, n - s): k = p + s; p in [n - s, n): k = p + s - n
-                _add(out, a, wj, base, base + s * inner, (n - s) * inner)
-                _add(out, a, wj, base + (n - s) * inner, base, s * inner)
-            else:
-                lo = max(0, -s)
-                hi = min(n, n - s)
-                if hi > lo:
-                    _add(out, a, wj, base + lo * inner, base + (lo + s) * inner, (hi - lo) * inner)
-    return out
-
-
-@njit_cached(nogil=True)
-def conv3(  # pragma: no cover - compiled
-    a: np.ndarray, w: np.ndarray, circ_t: bool, circ_y: bool, circ_x: bool
-) -> np.ndarray:
-    """The separable 3D convolution of ``a`` by the 1D kernel ``w`` on every axis:
-    x, then y, then theta (see :func:`conv_axis`).
-
-    Shape:
-        a: ``(T, Y, X)`` C-contiguous; w: ``(K,)`` of ``a``'s dtype; returns ``(T, Y, X)``.
-    """
-    t, y, x = a.shape
-    flat = a.reshape(t * y * x)
-    flat = conv_axis(flat, w, t * y, x, 1, circ_x)
-    flat = conv_axis(flat, w, t, y, x, circ_y)
-    flat = conv_axis(flat, w, 1, t, y * x, circ_t)
-    return flat.reshape((t, y, x))
-
-
 @njit_cached(nogil=True, inline="always")
 def _grown(lo: int, hi: int, n: int, k: int, circular: bool) -> tuple[int, int]:  # pragma: no cover
     """Where a convolution by ``k`` taps along an axis of ``n`` cells can be non-zero when
@@ -174,3 +122,22 @@ def conv3_box(  # pragma: no cover - compiled
     out_box[1, 0], out_box[1, 1] = y0, y1
     out_box[2, 0], out_box[2, 1] = x0, x1
     return et.reshape((t, y, x)), out_box
+
+
+@njit_cached(nogil=True)
+def conv3(  # pragma: no cover - compiled
+    a: np.ndarray, w: np.ndarray, circ_t: bool, circ_y: bool, circ_x: bool
+) -> np.ndarray:
+    """The separable 3D convolution of ``a`` by the 1D kernel ``w`` on every axis:
+    x, then y, then theta, each output cell ``out[p] = sum_j w[j] * a[p + h - j]``
+    (``h = len(w) // 2``), the taps added in the order of ``j``; indices wrap on a
+    circular axis, else the array is zero outside it (:func:`conv3_box` on the whole
+    array).
+
+    Shape:
+        a: ``(T, Y, X)`` C-contiguous; w: ``(K,)`` of ``a``'s dtype; returns ``(T, Y, X)``.
+    """
+    box = np.zeros((3, 2), np.int64)
+    for ax in range(3):
+        box[ax, 1] = a.shape[ax]
+    return conv3_box(a, w, circ_t, circ_y, circ_x, box)[0]
