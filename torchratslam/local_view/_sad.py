@@ -64,11 +64,52 @@ def early_sad(  # pragma: no cover - compiled
 _BOUND_MATH = {"reassoc", "nsz", "contract"}
 
 
+# templates whose pair bounds are computed together (8 kB per offset, in L1 or L2)
+PAIR_BLOCK = 1024
+
+
+@njit_cached(nogil=True)
+def pair_bounds(  # pragma: no cover - compiled
+    pairs_t: np.ndarray,
+    t0: int,
+    t1: int,
+    vpairs: np.ndarray,
+    bases: np.ndarray,
+    out: np.ndarray,
+    least: np.ndarray,
+) -> None:
+    """The pair bound of templates ``t0 .. t1 - 1`` at every offset, in the arrays'
+    dtype: ``out[k, i]`` is the L1 distance between the view's pair sums ``vpairs`` and
+    template ``t0 + i``'s pair sums from entry ``bases[k]`` on, summed in entry order
+    (no reassociation, so the same bits on every machine), and ``least[i]`` its least
+    over the offsets, NaN when any of them is NaN or infinite; one pass over a
+    column-major copy of the templates' pair sums, vectorised across templates.
+
+    Shape:
+        pairs_t: ``(2 * (X // 2), capacity)``; vpairs: ``(W // 2,)``; bases: ``(K,)``;
+        out: ``(K, >= t1 - t0)``; least: ``(>= t1 - t0,)``.
+    """
+    m = t1 - t0
+    for k in range(bases.shape[0]):
+        o = out[k]
+        for i in range(m):
+            o[i] = 0.0
+        for j in range(vpairs.shape[0]):
+            row = pairs_t[bases[k] + j, t0:t1]  # indices from range(): no wraparound checks
+            v = vpairs[j]
+            for i in range(m):
+                o[i] += abs(row[i] - v)
+        for i in range(m):
+            x = o[i]
+            low = x if k == 0 or x < least[i] else least[i]
+            least[i] = low if x < np.inf else np.nan  # NaN and infinities: NaN
+
+
 @njit_cached(nogil=True, fastmath=_BOUND_MATH)
 def search_normal(  # pragma: no cover - compiled
     data: np.ndarray,
     cols: np.ndarray,
-    pairs: np.ndarray,
+    pairs_t: np.ndarray,
     n: int,
     view: np.ndarray,
     offsets: np.ndarray,
@@ -82,9 +123,11 @@ def search_normal(  # pragma: no cover - compiled
     """Normal mode: every (template, offset) pair through three stages of elimination.
 
     Per pair, the L1 distance between the sums of pairs of compared columns (the
-    view's, summed in float64, against the template's, read from ``pairs``: 47 numbers
-    per template of 48 columns serve every offset), then between the compared columns'
-    sums (the view's against ``cols[t, o:o + width]``):
+    view's, summed in float64, against the template's: 47 numbers per template of 48
+    columns serve every offset, read from their column-major float32 copy ``pairs_t``
+    for :data:`PAIR_BLOCK` templates at a time by :func:`pair_bounds`, less what
+    float32's rounding allows), then between the
+    compared columns' sums (the view's against ``cols[t, o:o + width]``):
     lower bounds of the pair's SAD by the triangle inequality, each tighter than the
     last; then, if both are within the cut, the float64 SAD itself, row by row with
     early exit. The hint template goes first (its error
@@ -94,9 +137,10 @@ def search_normal(  # pragma: no cover - compiled
     Args:
         data: the bank's rows, ``(capacity, Y, X)``.
         cols: each template's column sums, ``(capacity, X)``.
-        pairs: each template's sums of adjacent column pairs, from even columns then
-            from odd columns (``(capacity, 2 * (X // 2))``): block ``j`` of offset
-            ``o``'s window is entry ``(o % 2) * (X // 2) + o // 2 + j``.
+        pairs_t: each template's sums of adjacent column pairs, from even columns then
+            from odd columns, column-major, float32 (``(2 * (X // 2), capacity)``;
+            NaN where a sum is past float32's range): block ``j``
+            of offset ``o``'s window is entry ``(o % 2) * (X // 2) + o // 2 + j``.
         n: templates in the bank.
         view: the view template, ``(Y, X)``.
         offsets: the column offset of each offset index, ``(K,)``.
@@ -115,7 +159,7 @@ def search_normal(  # pragma: no cover - compiled
     """
     kk = offsets.shape[0]
     nb = width // 2
-    half = pairs.shape[1] // 2
+    half = pairs_t.shape[0] // 2
     # the column sums of the view's compared columns, and their sums in pairs
     vcols = np.zeros(width)
     for y in range(view.shape[0]):
@@ -124,52 +168,79 @@ def search_normal(  # pragma: no cover - compiled
     vpairs = np.empty(nb)
     for j in range(nb):
         vpairs[j] = vcols[2 * j] + vcols[2 * j + 1]
+    bases = np.empty(kk, np.int64)
+    for ki in range(kk):
+        bases[ki] = (offsets[ki] % 2) * half + offsets[ki] // 2
+    # the pair bounds in float32 (twice as many lanes): ``s32`` is at most
+    # ``(1 + eps) * true + eps * vsum`` (the rounding of the inputs to float32 and of
+    # the nb-term sum), so ``s32 * (1 - eps) - eps * vsum`` is a lower bound; a bound
+    # that is not finite (a value past float32's range) prunes nothing
+    v32 = np.empty(nb, np.float32)
+    vsum = 0.0
+    for j in range(nb):
+        v32[j] = np.float32(vpairs[j])
+        vsum += abs(vpairs[j])
+    eps = 2.0 * (nb + 4) * 2.0**-24
+    keep = 1.0 - eps
+    slack = eps * vsum
+    bound = np.empty((kk, PAIR_BLOCK), np.float32)
+    least = np.empty(PAIR_BLOCK, np.float32)
     out_t = np.empty(n * kk, np.int64)
     out_k = np.empty(n * kk, np.int64)
     out_s = np.empty(n * kk, np.float64)
     m = 0
     best = best0
     pruned = np.inf
-    for j in range(n + 1):
-        if j == 0:
-            if hint < 0 or hint >= n:
-                continue
-            t = hint
+    first = 0 <= hint < n
+    # the hint alone first, then the templates in id order, a block at a time
+    blk0 = -1 if first else 0
+    while blk0 < n:
+        if blk0 < 0:
+            t0, t1 = hint, hint + 1
         else:
-            t = j - 1
-            if t == hint:
-                continue
-        for ki in range(kk):
-            cut = min(best, cap) + margin
-            o = offsets[ki]
-            b = 0.0
-            base = (o % 2) * half + o // 2
-            row = pairs[t, base : base + nb]  # indices from range(): no wraparound checks
-            for j in range(nb):
-                b += abs(row[j] - vpairs[j])
-            if b > cut:
-                if b < pruned:
+            t0, t1 = blk0, min(blk0 + PAIR_BLOCK, n)
+        pair_bounds(pairs_t, t0, t1, v32, bases, bound, least)
+        # a template whose every pair bound is above the cut is skipped whole (the cut
+        # only falls, so it would be skipped later in the block too)
+        cut0 = min(best, cap) + margin
+        skip = np.zeros(t1 - t0, np.bool_)
+        for i in range(t1 - t0):
+            b = np.float64(least[i]) * keep - slack
+            if b > cut0 and b < np.inf:
+                skip[i] = True
+                if b < pruned and not (blk0 >= 0 and first and t0 + i == hint):
                     pruned = b
+        for t in range(t0, t1):
+            if skip[t - t0] or (blk0 >= 0 and first and t == hint):
                 continue
-            b = 0.0
-            win = cols[t, o : o + width]
-            for c in range(width):
-                b += abs(win[c] - vcols[c])
-            if b > cut:
-                if b < pruned:
-                    pruned = b
-                continue
-            s = early_sad(data, t, view, o, False, width, shift, cut)
-            if s > cut:
-                if s - margin < pruned:
-                    pruned = s - margin
-                continue
-            out_t[m] = t
-            out_k[m] = ki
-            out_s[m] = s
-            m += 1
-            if s < best:
-                best = s
+            for ki in range(kk):
+                cut = min(best, cap) + margin
+                b = np.float64(bound[ki, t - t0]) * keep - slack
+                if b > cut and b < np.inf:
+                    if b < pruned:
+                        pruned = b
+                    continue
+                o = offsets[ki]
+                b = 0.0
+                win = cols[t, o : o + width]
+                for c in range(width):
+                    b += abs(win[c] - vcols[c])
+                if b > cut:
+                    if b < pruned:
+                        pruned = b
+                    continue
+                s = early_sad(data, t, view, o, False, width, shift, cut)
+                if s > cut:
+                    if s - margin < pruned:
+                        pruned = s - margin
+                    continue
+                out_t[m] = t
+                out_k[m] = ki
+                out_s[m] = s
+                m += 1
+                if s < best:
+                    best = s
+        blk0 = 0 if blk0 < 0 else t1
     return out_t, out_k, out_s, m, best, pruned
 
 

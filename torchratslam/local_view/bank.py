@@ -66,6 +66,7 @@ class TemplateBank(nn.Module):
         self._means_n = 0  # templates whose mean is computed (on demand: see means)
         self._capacity = 0
         self._arrays: dict[str, tuple[torch.Tensor, np.ndarray]] = {}
+        self._columns: dict[str, tuple[np.ndarray, np.ndarray, int]] = {}
         self._alloc(max(1, int(capacity)))
 
     def _shapes(self) -> dict[str, tuple[int, ...]]:
@@ -92,6 +93,8 @@ class TemplateBank(nn.Module):
             if old is not None:
                 tensor[: self._n] = old[: self._n]
             self._arrays.pop(name, None)  # the old buffer is freed once replaced
+            for key in [k for k in self._columns if k.split(":")[0] == name]:
+                del self._columns[key]  # its copies are made again from the new rows
             self.register_buffer("_" + name, tensor, persistent=False)
             del old
         frames = torch.full((capacity,), -1, dtype=torch.int64, device=self.device)
@@ -177,6 +180,37 @@ class TemplateBank(nn.Module):
             cached = (buf, buf.numpy())
             self._arrays[name] = cached
         return cached[1]
+
+    def column_major(self, name: str, dtype: np.dtype | type | None = None) -> np.ndarray:
+        """A column-major copy of :meth:`array` ``(name)`` over the whole capacity (rows
+        from ``len(self)`` on are zeros), kept up to date as templates are appended (only
+        the new rows are copied): what a search that reads one entry of every template
+        at a time streams through. CPU only.
+
+        Args:
+            name: ``"data"``, ``"means"`` or a summary.
+            dtype: the copy's dtype (default: the bank's); a value the dtype cannot
+                hold (beyond float32's range, say) is NaN in the copy, never infinite.
+
+        Shape:
+            ``(*shape, capacity)``.
+        """
+        rows = self.array(name)
+        dt = rows.dtype if dtype is None else np.dtype(dtype)
+        key = f"{name}:{dt.str}"
+        cached = self._columns.get(key)
+        if cached is None or cached[0] is not rows:
+            cached = (rows, np.zeros((*rows.shape[1:], rows.shape[0]), dt), 0)
+        src, out, filled = cached
+        if filled < self._n:
+            new = np.moveaxis(src[filled : self._n], 0, -1)
+            with np.errstate(over="ignore"):
+                cast = new.astype(dt)
+            cast[np.isfinite(new) & ~np.isfinite(cast)] = np.nan
+            out[..., filled : self._n] = cast
+            cached = (src, out, self._n)
+        self._columns[key] = cached
+        return out
 
     def _buffer(self, name: str) -> torch.Tensor:
         buf = self._buffers["_" + name]

@@ -186,7 +186,7 @@ def compiled_windows(state: SearchState, hint: int) -> None:
     pt, pk, ps, m, best64, low = search_normal(
         bank.array("data"),
         bank.array("cols"),
-        bank.array("pairs"),
+        bank.column_major("pairs", np.float32),
         n,
         np.ascontiguousarray(state.view.numpy()),
         matcher.offsets_np,

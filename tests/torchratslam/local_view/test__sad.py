@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 import torch
 
-from torchratslam.local_view._sad import search_normal, search_panoramic
+from torchratslam.local_view._sad import PAIR_BLOCK, pair_bounds, search_normal, search_panoramic
 from torchratslam.local_view.matcher import TemplateMatcher
 
 
@@ -99,10 +99,131 @@ def test_normal_search_keeps_the_best_and_bounds_what_it_skips(y, x, shift, step
                          m.offsets_np, False, shift)  # fmt: skip
         for hint in (-1, i):
             out = search_normal(
-                bank.array("data"), bank.array("cols"), bank.array("pairs"), n, view,
-                m.offsets_np, m.width, m.shift, hint, math.inf, cap * m.npix, margin,
+                bank.array("data"), bank.array("cols"), bank.column_major("pairs", np.float32),
+                n, view, m.offsets_np, m.width, m.shift, hint, math.inf, cap * m.npix, margin,
             )  # fmt: skip
             _check_screen(sad, *out, cap * m.npix, margin)
+
+
+def test_pair_bounds_are_a_loops_sums_in_entry_order_and_their_least():
+    rng = np.random.default_rng(5)
+    pairs_t = rng.random((12, 50)) * 4
+    vpairs = rng.random(4) * 4
+    bases = np.array([0, 6, 1, 7, 2])
+    out, least = np.full((5, 64), np.nan), np.full(64, np.nan)
+    pair_bounds(pairs_t, 7, 40, vpairs, bases, out, least)
+    for i in range(33):
+        for k, b in enumerate(bases):
+            want = 0.0
+            for j in range(4):  # in entry order: the same bits
+                want += abs(float(pairs_t[b + j, 7 + i]) - float(vpairs[j]))
+            assert out[k, i] == want
+        assert least[i] == min(out[:, i])
+    assert np.isnan(out[:, 33:]).all() and np.isnan(least[33:]).all()
+
+
+@pytest.mark.parametrize("cap", [math.inf, 0.04])
+def test_normal_search_over_several_blocks_keeps_the_best_and_skips_the_hint_once(cap):
+    rng = np.random.default_rng(12)
+    y, x, shift, n = 2, 10, 2, 2 * PAIR_BLOCK + 37
+    bank_np, views = _bank_and_views(rng, n, y, x)
+    m = TemplateMatcher(y, x, panoramic=False, shift=shift, step=1)
+    bank = m.make_bank(dtype=torch.float32, device=None)
+    bank.append(torch.from_numpy(bank_np))
+    margin = 1e-5 * m.npix
+    # views made from the first and last template of each block, and two others
+    edges = [PAIR_BLOCK - 1, PAIR_BLOCK, 2 * PAIR_BLOCK - 1, 2 * PAIR_BLOCK, n - 1]
+    near = [np.clip(bank_np[t] + 1e-4 * rng.random((y, x)), 0, 1).astype(np.float32) for t in edges]
+    for view in views[:2] + near:
+        v64 = view.astype(np.float64)
+        sad = np.stack(
+            [np.abs(v64[:, shift : x - shift] - bank_np[:, :, o : o + m.width]).sum((1, 2))
+             for o in m.offsets_np], 1,
+        )  # fmt: skip
+        for hint in (-1, 0, PAIR_BLOCK + 5, n - 1):
+            out = search_normal(
+                bank.array("data"), bank.array("cols"), bank.column_major("pairs", np.float32),
+                n, view, m.offsets_np, m.width, m.shift, hint, math.inf, cap * m.npix, margin,
+            )  # fmt: skip
+            _check_screen(sad, *out, cap * m.npix, margin)
+            pairs = list(zip(out[0][: out[3]].tolist(), out[1][: out[3]].tolist()))
+            assert len(pairs) == len(set(pairs))  # no pair screened twice (the hint)
+
+
+def test_pair_bounds_in_float32_and_a_value_out_of_range_poisons_the_least():
+    rng = np.random.default_rng(6)
+    pairs_t = (rng.random((8, 20)) * 4).astype(np.float32)
+    pairs_t[2, 5] = np.nan  # a sum past float32's range, as the bank's copy stores it
+    pairs_t[6, 9] = np.inf
+    vpairs = (rng.random(3) * 4).astype(np.float32)
+    bases = np.array([0, 4, 5])
+    out, least = np.empty((3, 20), np.float32), np.empty(20, np.float32)
+    pair_bounds(pairs_t, 0, 20, vpairs, bases, out, least)
+    for i in range(20):
+        for k, b in enumerate(bases):
+            want = np.float32(0.0)
+            for j in range(3):  # float32 arithmetic, in entry order
+                want = np.float32(want + np.float32(abs(pairs_t[b + j, i] - vpairs[j])))
+            np.testing.assert_array_equal(out[k, i], want)
+        if i in (5, 9):  # offsets whose window holds the NaN or the infinity
+            assert np.isnan(least[i])
+        else:
+            assert least[i] == out[:, i].min()
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_normal_search_in_float64_keeps_bounds_below_sads_despite_float32_rounding(seed):
+    """Templates that are the view plus a constant, one offset: each pair bound is its
+    SAD in exact arithmetic, and every pair but the best is skipped on that bound alone,
+    so the least bound skipped is a rounded bound: rounded up past its SAD, it would
+    claim more than is true."""
+    rng = np.random.default_rng(seed)
+    y, x, shift = 3, 12, 0  # one offset
+    view = 100 * rng.random((y, x)) + 50
+    consts = 0.3 + 1e-3 * np.arange(10)
+    bank_np = np.stack([view + c for c in consts])
+    m = TemplateMatcher(y, x, panoramic=False, shift=shift, step=1)
+    bank = m.make_bank(dtype=torch.float64, device=None)
+    bank.append(torch.from_numpy(bank_np))
+    sad = _sad_loops(bank_np, view, m.offsets_np, False, shift)
+    margin = 1e-11 * m.npix
+    for cap in (math.inf, 0.3 * (1 - 1e-9)):  # the first matches; none matches
+        out = search_normal(
+            bank.array("data"), bank.array("cols"), bank.column_major("pairs", np.float32),
+            len(bank_np), view, m.offsets_np, m.width, m.shift, -1, math.inf,
+            cap * m.npix, margin,
+        )  # fmt: skip
+        _check_screen(sad, *out, cap * m.npix, margin)
+
+
+def test_normal_search_with_sums_past_float32s_range_falls_back_to_float64():
+    rng = np.random.default_rng(14)
+    y, x, shift = 2, 8, 1
+    bank_np = rng.random((6, y, x))
+    bank_np[2] *= 1e39  # pair sums past float32's range
+    view = bank_np[4] + 1e-3
+    m = TemplateMatcher(y, x, panoramic=False, shift=shift, step=1)
+    bank = m.make_bank(dtype=torch.float64, device=None)
+    bank.append(torch.from_numpy(bank_np))
+    p32 = bank.column_major("pairs", np.float32)
+    assert np.isnan(p32[:, 2]).any() and np.isfinite(p32[:, [0, 1, 3, 4, 5]]).all()
+    sad = _sad_loops(bank_np, view, m.offsets_np, False, shift)
+    margin = 1e-11 * m.npix
+    out = search_normal(
+        bank.array("data"), bank.array("cols"), p32, 6, view, m.offsets_np, m.width,
+        m.shift, -1, math.inf, math.inf, margin,
+    )  # fmt: skip
+    _check_screen(sad, *out, math.inf, margin)
+    # a view past float32's range: no float32 bound prunes; the float64 stages decide
+    big = view * 1e39
+    sad = _sad_loops(bank_np, big, m.offsets_np, False, shift)
+    pt, pk, _, k, best, _ = search_normal(
+        bank.array("data"), bank.array("cols"), p32, 6, big, m.offsets_np, m.width,
+        m.shift, -1, math.inf, math.inf, margin,
+    )  # fmt: skip
+    t, o = np.unravel_index(np.argmin(sad), sad.shape)
+    assert (t, o) in set(zip(pt[:k].tolist(), pk[:k].tolist()))
+    assert best == pytest.approx(sad.min(), rel=1e-12)
 
 
 def test_panoramic_search_on_equal_templates_keeps_every_tie():

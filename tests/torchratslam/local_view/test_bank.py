@@ -64,6 +64,33 @@ def test_array_is_a_numpy_view_of_the_whole_capacity_that_follows_growth():
     assert float(bank.data[0, 0, 0]) == 7.0
 
 
+def test_column_major_copy_follows_appends_and_growth():
+    rng = np.random.default_rng(3)
+    bank = _bank(capacity=2)
+    for k in (1, 2, 1, 5, 3):  # growth 2 -> 4 -> 16 on the way
+        bank.append(torch.from_numpy(rng.random((k, 3, 5))))
+        cm = bank.column_major("cols")
+        rows = bank.array("cols")
+        assert cm.shape == (5, bank.capacity) and cm.flags.c_contiguous
+        for i in range(bank.capacity):  # entry by entry: row i's entries in column i
+            for c in range(5):
+                assert cm[c, i] == rows[i, c]
+        assert not cm[:, len(bank) :].any()
+    assert bank.column_major("cols") is cm  # nothing new: the same copy
+
+
+def test_column_major_copy_in_a_narrower_dtype_stores_nan_for_what_it_cannot_hold():
+    bank = _bank(capacity=4)
+    rows = np.full((2, 3, 5), 0.1)
+    rows[1, 0, 2] = 1e39  # past float32's range
+    bank.append(torch.from_numpy(rows))
+    cm = bank.column_major("data", np.float32)
+    assert cm.dtype == np.float32 and cm.shape == (3, 5, 4)
+    assert np.isnan(cm[0, 2, 1]) and np.isnan(cm).sum() == 1
+    assert cm[1, 1, 0] == np.float32(0.1) and not np.isinf(cm).any()
+    assert bank.column_major("data").dtype == np.float64  # a copy per dtype
+
+
 def test_frames_default_to_minus_one_and_batches_take_one_frame_each():
     bank = _bank(capacity=8)
     assert list(bank.append(torch.zeros(2, 3, 5))) == [0, 1]
