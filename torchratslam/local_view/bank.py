@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Collection, Mapping
 
 import numpy as np
 import torch
@@ -34,6 +34,9 @@ class TemplateBank(nn.Module):
         summaries: function computing the summaries of a batch ``(K, Y, X)`` of templates
             (tensors, or numpy arrays for a bank on the CPU).
         summary_shapes: name -> per-template shape of each summary.
+        lazy: summaries computed when first read (then kept up to date as templates
+            are appended, on each read) rather than on append: no memory until a
+            search asks for them.
         capacity: initial number of rows.
         dtype: template dtype.
         device: template device.
@@ -54,6 +57,7 @@ class TemplateBank(nn.Module):
         capacity: int = 64,
         dtype: torch.dtype = torch.float64,
         device: torch.device | str | None = None,
+        lazy: Collection[str] = (),
     ) -> None:
         if y_size <= 0 or x_size <= 0:
             raise ConfigError(f"template size must be positive, got {x_size}x{y_size}")
@@ -61,6 +65,10 @@ class TemplateBank(nn.Module):
         self.y_size, self.x_size = int(y_size), int(x_size)
         self._summarise = summaries
         self._summary_shapes = dict(summary_shapes or {})
+        unknown = set(lazy) - set(self._summary_shapes)
+        if unknown:
+            raise ConfigError(f"lazy summaries {sorted(unknown)} are not among the summaries")
+        self._lazy_n = dict.fromkeys(lazy, -1)  # rows computed; -1: not allocated
         self.dtype, self.device = dtype, torch.device(device) if device is not None else None
         self._n = 0
         self._means_n = 0  # templates whose mean is computed (on demand: see means)
@@ -70,7 +78,13 @@ class TemplateBank(nn.Module):
         self._alloc(max(1, int(capacity)))
 
     def _shapes(self) -> dict[str, tuple[int, ...]]:
-        return {"data": (self.y_size, self.x_size), "means": (), **self._summary_shapes}
+        """The buffers allocated: rows, means and the summaries (lazy ones once read)."""
+        lazy = self._lazy_n
+        return {
+            "data": (self.y_size, self.x_size),
+            "means": (),
+            **{k: v for k, v in self._summary_shapes.items() if lazy.get(k, 0) >= 0},
+        }
 
     def _zeros(self, capacity: int, shape: tuple[int, ...]) -> torch.Tensor:
         """A zero buffer of ``capacity`` rows. On the CPU its memory comes from the
@@ -157,7 +171,27 @@ class TemplateBank(nn.Module):
         """
         if name not in self._summary_shapes:
             raise KeyError(f"the bank keeps no summary {name!r} ({sorted(self._summary_shapes)})")
+        self._fill_lazy(name)
         return self._buffer(name)[: self._n]
+
+    def _fill_lazy(self, name: str) -> None:
+        """A lazy summary's rows up to ``len(self)``: allocated on first use, then the
+        new rows' summaries computed."""
+        done = self._lazy_n.get(name)
+        if done is None or done == self._n:
+            return
+        if done < 0:
+            zeros = self._zeros(self._capacity, self._summary_shapes[name])
+            self.register_buffer("_" + name, zeros, persistent=False)
+            done = 0
+        assert self._summarise is not None  # a lazy summary is one of the summaries
+        self._lazy_n[name] = self._n
+        if done < self._n:
+            value = self._summarise(self._buffer("data")[done : self._n])[name]
+            if isinstance(value, np.ndarray):
+                self.array(name)[done : self._n] = value
+            else:
+                self._buffer(name)[done : self._n] = value
 
     @property
     def on_cpu(self) -> bool:
@@ -174,6 +208,7 @@ class TemplateBank(nn.Module):
         """
         if name == "means":
             self._fill_means()
+        self._fill_lazy(name)
         buf = self._buffer(name)
         cached = self._arrays.get(name)
         if cached is None or cached[0] is not buf:
@@ -218,8 +253,9 @@ class TemplateBank(nn.Module):
         return buf
 
     def bytes_per_template(self) -> int:
-        """Memory per stored template: data, summaries and metadata."""
-        floats = sum(math.prod(shape) for shape in self._shapes().values())
+        """Memory per stored template: data, summaries (lazy ones too) and metadata."""
+        shapes = {"data": (self.y_size, self.x_size), "means": (), **self._summary_shapes}
+        floats = sum(math.prod(shape) for shape in shapes.values())
         return floats * (torch.finfo(self.dtype).bits // 8) + 8
 
     def append(
@@ -265,6 +301,8 @@ class TemplateBank(nn.Module):
             self._buffer("data")[sl] = t
         if self._summarise is not None:
             for name, value in self._summarise(t).items():
+                if name in self._lazy_n:  # computed when read
+                    continue
                 if isinstance(value, np.ndarray):
                     self.array(name)[sl] = value
                 else:

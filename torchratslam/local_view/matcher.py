@@ -147,6 +147,9 @@ class TemplateMatcher:
             summary_shapes=shapes,
             dtype=dtype,
             device=device,
+            # normal mode: the compiled search reads no pool (the torch cascade and
+            # the newest-first search do, when used)
+            lazy=() if self.panoramic else ("pool",),
         )
 
     def _mat(self, name: str, dtype: torch.dtype) -> torch.Tensor:

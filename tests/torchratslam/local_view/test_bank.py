@@ -91,6 +91,44 @@ def test_column_major_copy_in_a_narrower_dtype_stores_nan_for_what_it_cannot_hol
     assert bank.column_major("data").dtype == np.float64  # a copy per dtype
 
 
+def test_a_lazy_summary_takes_no_memory_until_read_then_follows_appends():
+    calls = []
+
+    def summaries(t: torch.Tensor) -> dict[str, torch.Tensor]:
+        calls.append(len(t))
+        return _summaries(t)
+
+    def make(lazy: tuple[str, ...]) -> TemplateBank:
+        return TemplateBank(
+            3, 5, summaries=summaries, summary_shapes={"cols": (5,), "peak": (1,)},
+            capacity=2, dtype=torch.float64, lazy=lazy,
+        )  # fmt: skip
+
+    rng = np.random.default_rng(4)
+    rows = rng.random((11, 3, 5))
+    eager, bank = make(()), make(("peak",))
+    assert bank.bytes_per_template() == eager.bytes_per_template()  # what it may use
+    for r in rows[:5]:
+        eager.append(torch.from_numpy(r))
+        bank.append(torch.from_numpy(r))
+    assert "_peak" not in bank._buffers and "_peak" in eager._buffers  # nothing allocated
+    calls.clear()
+    np.testing.assert_array_equal(bank.summary("peak").numpy(), eager.summary("peak").numpy())
+    assert calls == [5]  # the five rows at once
+    bank.summary("peak")
+    assert calls == [5]  # nothing new: nothing computed
+    for r in rows[5:]:  # grows 8 -> 16 rows on the way
+        eager.append(torch.from_numpy(r))
+        bank.append(torch.from_numpy(r))
+    peak = bank.array("peak")
+    assert peak.shape == (16, 1) and not peak[11:].any()
+    np.testing.assert_array_equal(peak[:11], eager.array("peak")[:11])
+    for i in range(11):
+        assert peak[i, 0] == rows[i].max()
+    with pytest.raises(ConfigError, match="lazy"):
+        make(("nope",))
+
+
 def test_frames_default_to_minus_one_and_batches_take_one_frame_each():
     bank = _bank(capacity=8)
     assert list(bank.append(torch.zeros(2, 3, 5))) == [0, 1]
