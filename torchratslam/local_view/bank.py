@@ -238,11 +238,14 @@ class TemplateBank(nn.Module):
             cached = (rows, np.zeros((*rows.shape[1:], rows.shape[0]), dt), 0)
         src, out, filled = cached
         if filled < self._n:
-            new = np.moveaxis(src[filled : self._n], 0, -1)
-            with np.errstate(over="ignore"):
-                cast = new.astype(dt)
-            cast[np.isfinite(new) & ~np.isfinite(cast)] = np.nan
-            out[..., filled : self._n] = cast
+            new = src[filled : self._n]
+            if dt != rows.dtype:
+                with np.errstate(over="ignore"):
+                    cast = new.astype(dt)
+                if not np.isfinite(cast).all():  # past dt's range (the rows are finite)
+                    cast[~np.isfinite(cast)] = np.nan
+                new = cast
+            out[..., filled : self._n] = new.T if new.ndim == 2 else np.moveaxis(new, 0, -1)
             cached = (src, out, self._n)
         self._columns[key] = cached
         return out
@@ -309,8 +312,11 @@ class TemplateBank(nn.Module):
                     self._buffer(name)[sl] = value
         if frames is None:
             frames = -1
-        if not isinstance(frames, int):
-            frames = torch.as_tensor(frames, dtype=torch.int64, device=self.device)
-        self._buffer("frames")[sl] = frames
+        if isinstance(frames, int) and on_cpu:
+            self.array("frames")[sl] = frames
+        else:
+            if not isinstance(frames, int):
+                frames = torch.as_tensor(frames, dtype=torch.int64, device=self.device)
+            self._buffer("frames")[sl] = frames
         self._n += k
         return range(self._n - k, self._n)
