@@ -74,7 +74,9 @@ _NUMPY = {torch.float32: np.float32, torch.float64: np.float64}
 
 
 def _on_cpu(device: torch.device | str | None) -> bool:
-    return device is None or torch.device(device).type == "cpu"
+    if device is None or isinstance(device, torch.device):  # no new device object
+        return device is None or device.type == "cpu"
+    return torch.device(device).type == "cpu"
 
 
 def _channels(shape: tuple[int, ...]) -> int:
@@ -171,7 +173,12 @@ def preprocess(
     if isinstance(image, np.ndarray) and image.dtype == np.uint8 and _on_cpu(device):
         _channels(image.shape)  # the checks
         means = block_means_uint8(image, *_blocks(image, params))
-        if params.vt_normalisation <= 0 and params.vt_patch_normalise <= 0 and dtype in _NUMPY:
+        if params.vt_patch_normalise <= 0 and dtype in _NUMPY:
+            if params.vt_normalisation > 0:  # torch's mean, then torch's operations in numpy
+                mean = float(torch.from_numpy(means).mean())
+                if mean > 0:  # number / tensor is torch's reciprocal times the number
+                    scale = (1.0 / mean) * params.vt_normalisation
+                    means = np.clip(means * scale, 0.0, 1.0)
             return torch.from_numpy(means.astype(_NUMPY[dtype]))  # rounded as torch rounds
         v = torch.from_numpy(means)
     else:
