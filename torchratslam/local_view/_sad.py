@@ -60,6 +60,19 @@ def early_sad(  # pragma: no cover - compiled
     return s
 
 
+@njit_cached(nogil=True, inline="always")
+def _sort_into(a: np.ndarray, out: np.ndarray) -> None:  # pragma: no cover - compiled
+    """``out[:] = np.sort(a)`` for a short, NaN-free ``a`` (a template's columns): an
+    insertion sort, several times faster than ``np.sort`` at 64 values."""
+    for i in range(a.shape[0]):
+        x = a[i]
+        j = i
+        while j > 0 and out[j - 1] > x:
+            out[j] = out[j - 1]
+            j -= 1
+        out[j] = x
+
+
 # bound sums may be reassociated (vectorised): the search's margin covers their rounding
 _BOUND_MATH = {"reassoc", "nsz", "contract"}
 
@@ -298,7 +311,7 @@ def search_panoramic(  # pragma: no cover - compiled
             vg[gi, c] += view[y, c]
     vsort = np.empty(g * nx)
     for gi in range(g):
-        vsort[gi * nx : (gi + 1) * nx] = np.sort(vg[gi])
+        _sort_into(vg[gi], vsort[gi * nx : (gi + 1) * nx])
     # block j (template columns a[j] .. a[j + 1] - 1) faces view columns a[j] - o ..
     # (mod X): differences of the circular prefix sums of the view's group columns
     a = np.zeros(nb + 1, np.int64)

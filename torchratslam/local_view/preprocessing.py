@@ -175,9 +175,9 @@ def preprocess(
         means = block_means_uint8(image, *_blocks(image, params))
         if params.vt_patch_normalise <= 0 and dtype in _NUMPY:
             if params.vt_normalisation > 0:  # torch's mean, then torch's operations in numpy
-                mean = float(torch.from_numpy(means).mean())
-                if mean > 0:  # number / tensor is torch's reciprocal times the number
-                    scale = (1.0 / mean) * params.vt_normalisation
+                level = float(torch.from_numpy(means).mean())
+                if level > 0:  # number / tensor is torch's reciprocal times the number
+                    scale = (1.0 / level) * params.vt_normalisation
                     means = np.clip(means * scale, 0.0, 1.0)
             return torch.from_numpy(means.astype(_NUMPY[dtype]))  # rounded as torch rounds
         v = torch.from_numpy(means)
