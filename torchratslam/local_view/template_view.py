@@ -117,7 +117,8 @@ class TemplateView(nn.Module):
         return self.bank.data
 
     def __len__(self) -> int:
-        return 0 if self.bank is None else len(self.bank)
+        bank = self._modules.get("bank")  # not through nn.Module's __getattr__: every frame
+        return 0 if bank is None else len(bank)
 
     @property
     def offsets(self) -> torch.Tensor:

@@ -8,7 +8,13 @@ import numpy as np
 import pytest
 import torch
 
-from torchratslam.local_view._sad import PAIR_BLOCK, pair_bounds, search_normal, search_panoramic
+from torchratslam.local_view._sad import (
+    PAIR_BLOCK,
+    _sort_into,
+    pair_bounds,
+    search_normal,
+    search_panoramic,
+)
 from torchratslam.local_view.matcher import TemplateMatcher
 
 
@@ -224,6 +230,15 @@ def test_normal_search_with_sums_past_float32s_range_falls_back_to_float64():
     t, o = np.unravel_index(np.argmin(sad), sad.shape)
     assert (t, o) in set(zip(pt[:k].tolist(), pk[:k].tolist()))
     assert best == pytest.approx(sad.min(), rel=1e-12)
+
+
+def test_sort_into_is_numpys_sort():
+    rng = np.random.default_rng(15)
+    for n in (0, 1, 2, 7, 64, 65):
+        for a in (rng.standard_normal(n), rng.integers(-3, 3, n).astype(np.float64)):
+            out = np.full(n, np.nan)
+            _sort_into(a, out)
+            np.testing.assert_array_equal(out, np.sort(a))
 
 
 def test_panoramic_search_on_equal_templates_keeps_every_tie():
