@@ -28,6 +28,7 @@ from torchratslam.pipeline.history import History
 from torchratslam.pipeline.results import RunResult, StepResult
 from torchratslam.pipeline.runner import RunProgress, open_frames, parked_gc
 from torchratslam.pipeline.threads import run_pipelined
+from torchratslam.pose_cells.stage import PoseCells
 from torchratslam.protocols import (
     ExperienceMapModule,
     FrameSource,
@@ -204,6 +205,11 @@ class RatSLAM:
     ) -> tuple[Action, tuple[float, float, float]]:
         pcs = self.pose_cells
         with self.timings.section("pose_cells"):
+            if type(pcs) is PoseCells and not self._skips_odometry(index):
+                # the stage's own frame: view, step and action in one compiled call
+                return pcs.on_frame(
+                    view, *odo, injection_angle=self.config.general.action_angle == "injection"
+                )
             pcs.on_view_template(view)
             if self._skips_odometry(index):
                 action = Action.none()
