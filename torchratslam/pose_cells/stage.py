@@ -37,11 +37,16 @@ _KINDS = (ActionKind.NONE, ActionKind.CREATE, ActionKind.LINK)
 _NO_ACTION = Action()
 
 
+_FRAME: Any = None
+
+
 def _kernels() -> Any:
-    """:mod:`torchratslam.pose_cells._frame` (numba, imported on first use)."""
+    """:mod:`torchratslam.pose_cells._frame` (numba, imported on first use and kept)."""
+    global _FRAME
     from torchratslam.pose_cells import _frame
 
-    return _frame
+    _FRAME = _frame
+    return _FRAME
 
 
 class PoseCells:
@@ -292,7 +297,7 @@ class PoseCells:
                     rad = self.vt_delta_pc_th * 2.0 * math.pi / self.dims[2]
                     action = Action(action.kind, action.dest_id, action.src_id, rad)
                 return action, self._best
-        status, kind, dest, src, x, y, th, angle = _kernels().frame_step(
+        status, kind, dest, src, x, y, th, angle = (_FRAME or _kernels()).frame_step(
             *args[3], match.template_id, match.relative_rad, vtrans, vrot, dt
         )
         if status:
