@@ -6,11 +6,14 @@ the pose cells' action stands, else odometry, the action (the experience map's o
 under ``exp_create_rule="activity"``, Eqs. 1-4) and the relaxation, one by one. An
 :class:`~ratslam_graph.experience_map.ExperienceMap` that keeps the class's own frame
 takes a frame without action or relaxation (about half of OpenRatSLAM's frames) as its
-odometry alone, without the layers between: what its ``step_frame`` would do.
+odometry alone, and a frame with an action as the compiled frame
+(:func:`ratslam_graph.frame_step.step_frame`) without the layers between: what its
+``step_frame`` would do.
 """
 
 from __future__ import annotations
 
+from ratslam_graph import frame_step
 from ratslam_graph.experience_map import ExperienceMap
 from ratslam_graph.frame_step import compiled_frame
 from ratslam_graph.messages import Action, ActionKind
@@ -50,15 +53,26 @@ def experience_map_step(
     activity = getattr(params, "exp_create_rule", "pc_distance") == "activity"
     relax = relax_every or action.kind != ActionKind.NONE
     if (
-        not relax
-        and odo is not None
-        and not activity
+        not activity
         and isinstance(em, ExperienceMap)
         and type(em).step_frame is ExperienceMap.step_frame
         and compiled_frame(em)
-    ):  # no action, no relaxation: the odometry is the frame (what step_frame does)
-        em.on_odometry(*odo)
-        return em._ist.item(0)  # current_id
+    ):  # what the class's step_frame does, without the layers between
+        if not relax and odo is not None:  # no action, no relaxation: the odometry alone
+            em.on_odometry(*odo)
+            return em._ist.item(0)  # current_id
+        if frame_step.step_frame(
+            em,
+            odo,
+            action,
+            frame=frame,
+            t=t,
+            pc=pc,
+            template_id=template_id,
+            behaviour=0 if behaviour is None else int(behaviour),
+            relax=relax,
+        ):
+            return em._ist.item(0)
     extra = {} if behaviour is None else {"behaviour": int(behaviour)}
     step = getattr(em, "step_frame", None)
     if step is not None and not activity:  # one call: odometry, action, relaxation
