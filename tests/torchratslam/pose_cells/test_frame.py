@@ -310,3 +310,25 @@ def test_the_state_slots_read_and_write_the_arrays():
     assert type(pcs.current_exp) is int and type(pcs.relative_rad) is float
     assert type(pcs._odo_update) is bool
     assert isinstance(PoseCells.current_exp, L.Slot)
+
+
+def test_decide_takes_the_first_nan_as_argmin_and_skips_the_current():
+    p = _params(exp_delta_pc_threshold=5.0)
+    cells = np.array([[1.0, 2.0, 3.0], [4.0, 5.0, 6.0], [np.nan, 1.0, 1.0], [1.5, 2.0, 3.0]])
+    for templates in ([0, 0, 0, 0], [0, 0, -1, 0]):  # the NaN row the template's, or not
+        pcs = PoseCells(p)
+        pcs._store(np.zeros((1, 3)), np.ones(1), cells, np.array(templates))
+        pcs.current_exp, pcs.current_vt, pcs.prev_vt = 0, 0, -1  # a new template: search
+        pcs._best = (1.4, 2.0, 3.0)
+        pcs._odo_update = pcs._vt_update = True
+        ids = [i for i in pcs.template_experiences(0) if i != 0]
+        kind, dest, src = decide(
+            pcs._ist, pcs._fst, pcs._e_pc, pcs._e_template, pcs._e_next, pcs._t_chain
+        )
+        d = pc_distance(cells[ids], np.array(pcs._best), p.dims)
+        k = int(np.argmin(d))  # numpy's choice: the first NaN, else the first nearest
+        assert (ids[k] == 2) == (templates[2] == 0)
+        if d[k] < 5.0:
+            assert (kind, dest, src) == (2, ids[k], 0)
+        else:  # a NaN is never within the threshold: a new experience
+            assert (kind, dest, src) == (1, 4, 0)
