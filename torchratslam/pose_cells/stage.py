@@ -115,6 +115,10 @@ class PoseCells:
         self._vt_update = False
         self._best = (float(self.dims[0] // 2), float(self.dims[1] // 2), float(self.dims[2] // 2))
 
+    def __getstate__(self) -> dict[str, Any]:
+        # a copy or a pickle makes new buffers: the compiled frame's views are made again
+        return {**self.__dict__, "_frame_args": None}
+
     def reset(self) -> None:
         """Back to the start: one active cell in the middle, no templates or experiences."""
         self.network.reset()

@@ -332,3 +332,21 @@ def test_decide_takes_the_first_nan_as_argmin_and_skips_the_current():
             assert (kind, dest, src) == (2, ids[k], 0)
         else:  # a NaN is never within the threshold: a new experience
             assert (kind, dest, src) == (1, 4, 0)
+
+
+def test_a_copy_and_a_pickle_go_on_as_the_original():
+    import copy
+    import pickle
+
+    p = _params(pc_vt_inject_energy=0.3)
+    pcs = PoseCells(p)
+    stream = list(_stream(90, seed=12))
+    for vt, rad in stream[:60]:
+        pcs.on_frame(ViewMatch(vt, rad), 0.7, 0.1, 1.0)
+    copies = [copy.deepcopy(pcs), pickle.loads(pickle.dumps(pcs))]
+    for vt, rad in stream[60:]:
+        want = pcs.on_frame(ViewMatch(vt, rad), 0.7, 0.1, 1.0)
+        for c in copies:
+            assert c.on_frame(ViewMatch(vt, rad), 0.7, 0.1, 1.0) == want
+    for c in copies:
+        _same_state(c, pcs)
