@@ -13,6 +13,8 @@ odometry alone, and a frame with an action as the compiled frame
 
 from __future__ import annotations
 
+from typing import Any
+
 from ratslam_graph import frame_step
 from ratslam_graph.experience_map import ExperienceMap
 from ratslam_graph.frame_step import compiled_frame
@@ -20,6 +22,26 @@ from ratslam_graph.messages import Action, ActionKind
 from torchratslam.protocols import ExperienceMapModule
 
 __all__ = ["experience_map_step"]
+
+
+def _plan(em: ExperienceMapModule) -> tuple[Any, Any, bool, bool, bool]:
+    """``(params, backend, compiled, relax every frame, activity rule)`` of ``em``: whether
+    the class's own compiled frame takes its frames (see the module's text); kept on an
+    :class:`~ratslam_graph.experience_map.ExperienceMap` for as long as its ``params``
+    and backend are the same objects."""
+    params = getattr(em, "params", None)
+    relax_every = getattr(params, "exp_relax", "every_frame") == "every_frame"
+    activity = getattr(params, "exp_create_rule", "pc_distance") == "activity"
+    compiled = (
+        not activity
+        and isinstance(em, ExperienceMap)
+        and type(em).step_frame is ExperienceMap.step_frame
+        and compiled_frame(em)
+    )
+    plan = (params, getattr(em, "_backend", None), compiled, relax_every, activity)
+    if isinstance(em, ExperienceMap):
+        em.__dict__["_stage_plan"] = plan
+    return plan
 
 
 def experience_map_step(
@@ -48,16 +70,12 @@ def experience_map_step(
             distances round the wrapping network.
         behaviour: the transition's movement label (Eq. 9), or None.
     """
-    params = getattr(em, "params", None)
-    relax_every = getattr(params, "exp_relax", "every_frame") == "every_frame"
-    activity = getattr(params, "exp_create_rule", "pc_distance") == "activity"
+    plan = em.__dict__.get("_stage_plan") if isinstance(em, ExperienceMap) else None
+    if plan is None or plan[0] is not em.params or plan[1] is not em._backend:  # type: ignore[attr-defined]
+        plan = _plan(em)
+    compiled, relax_every, activity = plan[2], plan[3], plan[4]
     relax = relax_every or action.kind != ActionKind.NONE
-    if (
-        not activity
-        and isinstance(em, ExperienceMap)
-        and type(em).step_frame is ExperienceMap.step_frame
-        and compiled_frame(em)
-    ):  # what the class's step_frame does, without the layers between
+    if compiled and isinstance(em, ExperienceMap):  # the class's step_frame, without layers
         if not relax and odo is not None:  # no action, no relaxation: the odometry alone
             em.on_odometry(*odo)
             return em._ist.item(0)  # current_id

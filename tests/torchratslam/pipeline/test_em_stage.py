@@ -113,3 +113,19 @@ def test_an_action_the_compiled_frame_refuses_goes_the_python_way():
         errors.append((type(info.value), str(info.value)))
     assert errors[0] == errors[1]
     assert same_map(fast, slow)
+
+
+def test_the_stage_follows_new_settings_of_the_map():
+    first = ExperienceMapParams(exp_relax="on_action")
+    later = (
+        ExperienceMapParams(exp_relax="every_frame", exp_loops=3),
+        ExperienceMapParams(exp_relax="on_action", exp_link_averaging=True),  # not compiled
+        first,
+    )
+    fast, slow = ExperienceMap(first), ExperienceMap(first)
+    for f in frames(5, 160):
+        if f[0] in (39, 79, 119):
+            for em in (fast, slow):
+                em.params = later[f[0] // 40]
+        assert stage(fast, *f) == one_by_one(slow, *f)
+    assert same_map(fast, slow)
