@@ -6,7 +6,8 @@ the pose cells' action stands, else odometry, the action (the experience map's o
 under ``exp_create_rule="activity"``, Eqs. 1-4) and the relaxation, one by one. An
 :class:`~ratslam_graph.experience_map.ExperienceMap` that keeps the class's own frame
 takes a frame without action or relaxation (about half of OpenRatSLAM's frames) as its
-odometry alone, and a frame with an action as the compiled frame
+odometry alone (one compiled call, ``ratslam_graph._frame_step.odometry``), and a frame
+with an action as the compiled frame
 (:func:`ratslam_graph.frame_step.step_frame`) without the layers between: what its
 ``step_frame`` would do.
 """
@@ -77,7 +78,7 @@ def experience_map_step(
     relax = relax_every or action.kind != ActionKind.NONE
     if compiled and isinstance(em, ExperienceMap):  # the class's step_frame, without layers
         if not relax and odo is not None:  # no action, no relaxation: the odometry alone
-            em.on_odometry(*odo)
+            (frame_step._KERNEL or frame_step._kernel()).odometry(em._fs, *odo)
             return em._ist.item(0)  # current_id
         if frame_step.step_frame(
             em,
