@@ -57,9 +57,12 @@ class PoseCells:
     after each odometry step, decides the experience-map
     :class:`~ratslam_graph.messages.Action`.
 
-    Call :meth:`on_view_template` and :meth:`on_odometry` once per frame; as in
-    OpenRatSLAM an action is only decided once both have been received since the last
-    decision (otherwise :meth:`on_odometry` returns ``NONE``).
+    Call :meth:`on_view_template` and :meth:`on_odometry` once per frame, or
+    :meth:`on_frame` for both (one compiled call on a CPU network, what the pipeline
+    does); as in OpenRatSLAM an action is only decided once both have been received
+    since the last decision (otherwise :meth:`on_odometry` returns ``NONE``). The
+    scalars (current experience and templates, the flags, the centre) live in two small
+    arrays the compiled kernels read and write (:mod:`~torchratslam.pose_cells._layout`).
 
     Args:
         params: pose-cell parameters.
