@@ -143,6 +143,18 @@ def count_transition(
 
 
 @njit_cached(nogil=True)
+def odometry(fs: np.ndarray, vtrans: float, vrot: float, dt: float) -> None:  # pragma: no cover
+    """The odometry since the current experience, in place (``ExperienceMap.on_odometry``):
+    the facing turns by ``vrot dt``, then ``vtrans dt`` along it; ``fs`` as
+    :func:`frame_step`'s."""
+    step = vtrans * dt
+    fs[2] = wrap_pi(fs[2] + vrot * dt)
+    fs[0] += step * math.cos(fs[2])
+    fs[1] += step * math.sin(fs[2])
+    fs[3] += dt
+
+
+@njit_cached(nogil=True)
 def frame_step(
     fs: np.ndarray,
     ist: np.ndarray,
@@ -194,11 +206,7 @@ def frame_step(
         :data:`RELAXED`, :data:`FIXED`.
     """
     if flags & 1:
-        step = vtrans * dt
-        fs[2] = wrap_pi(fs[2] + vrot * dt)
-        fs[0] += step * math.cos(fs[2])
-        fs[1] += step * math.sin(fs[2])
-        fs[3] += dt
+        odometry(fs, vtrans, vrot, dt)
     cur = ist[0]
     out = 0
     x = y = th = 0.0

@@ -168,6 +168,19 @@ def test_compiled_wrap_is_wrap_angle():
         )
 
 
+def test_compiled_odometry_is_on_odometry():
+    from ratslam_graph._frame_step import odometry
+
+    rng = np.random.default_rng(10)
+    fast, slow = ExperienceMap(), ExperienceMap()
+    for _ in range(20_000):
+        odo = tuple(rng.uniform([-1.0, -4.0, 0.0], [3.0, 4.0, 0.5]).tolist())
+        odometry(fast._fs, *odo)
+        slow.on_odometry(*odo)
+        assert fast._fs.tobytes() == slow._fs.tobytes()
+    assert abs(fast.accum_x) + abs(fast.accum_y) > 1.0
+
+
 def test_out_lists_are_each_sources_links_in_creation_order():
     rng = np.random.default_rng(9)
     src = rng.integers(0, 12, 80)

@@ -28,6 +28,7 @@ from torchratslam.pipeline.history import History
 from torchratslam.pipeline.results import RunResult, StepResult
 from torchratslam.pipeline.runner import RunProgress, open_frames, parked_gc
 from torchratslam.pipeline.threads import run_pipelined
+from torchratslam.pose_cells.stage import PoseCells
 from torchratslam.protocols import (
     ExperienceMapModule,
     FrameSource,
@@ -186,14 +187,15 @@ class RatSLAM:
     # ------------------------------------------------------------------ one frame
     def _stage_view(self, frame: Frame, index: int) -> tuple[tuple[float, float, float], ViewMatch]:
         with self.timings.section("odometry"):
-            odo = tuple(float(v) for v in self.odometry(frame))
+            vtrans, vrot, dt = self.odometry(frame)
+            odo = (float(vtrans), float(vrot), float(dt))
         if frame.image is None:
             raise InputError(
                 f"frame {frame.index}: no image; the local view needs one in every frame"
             )
         with self.timings.section("local_view"):
             view = self.local_view.process(frame.image, frame_index=index)
-        return odo, view  # type: ignore[return-value]
+        return odo, view
 
     def _skips_odometry(self, index: int) -> bool:
         """OpenRatSLAM's nodes skip their first odometry message (``skip_first_odometry``)."""
@@ -204,6 +206,11 @@ class RatSLAM:
     ) -> tuple[Action, tuple[float, float, float]]:
         pcs = self.pose_cells
         with self.timings.section("pose_cells"):
+            if type(pcs) is PoseCells and not self._skips_odometry(index):
+                # the stage's own frame: view, step and action in one compiled call
+                return pcs.on_frame(
+                    view, *odo, injection_angle=self.config.general.action_angle == "injection"
+                )
             pcs.on_view_template(view)
             if self._skips_odometry(index):
                 action = Action.none()
@@ -268,7 +275,9 @@ class RatSLAM:
     ) -> StepResult:
         self.history.append(index, frame.t, exp_id, frame.pose, odo, pc)
         self._last_t = float(frame.t)
-        n_t, n_e = counts if counts is not None else self.counts()[:2]
+        if counts is None:  # (the links' count is not wanted)
+            counts = (len(self.local_view), len(self.experience_map))
+        n_t, n_e = counts
         return StepResult(index, float(frame.t), view, action, odo, pc, exp_id, n_t, n_e)
 
     def step_frame(self, frame: Frame, *, behaviour: int | None = None) -> StepResult:

@@ -9,7 +9,6 @@ needs the excitation's reach and the move only. The step on the crop is one comp
 
 from __future__ import annotations
 
-import math
 from typing import Any
 
 import numpy as np
@@ -18,6 +17,7 @@ import torch
 from torchratslam.config import PoseCellParams
 from torchratslam.errors import InputError
 from torchratslam.pose_cells import functional as F
+from torchratslam.pose_cells._layout import ALL_ZERO
 from torchratslam.pose_cells.decode import CentreDecoder
 from torchratslam.pose_cells.motion import MotionTables
 
@@ -47,15 +47,22 @@ class NumpyEngine:
         }
         self.motion = MotionTables(params)
         self.decoder = CentreDecoder(params)
-        self.last_crop: tuple[int, int, int] = (th, n_y, n_x)
-        """The box (theta, y, x cells) the last step computed on."""
+        # the non-zero arcs (start, length) per axis (th, y, x), then the last box
+        self._span = np.zeros(9, dtype=np.int64)
+        self._span[6:] = (th, n_y, n_x)
+        self._span_key: tuple[int, int] | None = None  # the arcs' (data_ptr, _version)
         self._taps: dict[str, tuple[np.ndarray, np.ndarray, Any]] = {}
         self._geo_tables: dict[bool, tuple[np.ndarray, ...]] = {}  # per direction of travel
+        self._both: tuple[np.ndarray, ...] | None = None  # both directions stacked
         self._no_lookups = np.zeros((0, 0), dtype=np.float64)
-        self._arcs: list[tuple[int, int]] | None = None
-        self._arcs_key: tuple[int, int] | None = None
         self._view: tuple[torch.Tensor, int, np.ndarray] | None = None
         self._eh = max(params.pc_w_e_dim // 2, params.pc_w_e_dim - 1 - params.pc_w_e_dim // 2)
+
+    @property
+    def last_crop(self) -> tuple[int, int, int]:
+        """The box (theta, y, x cells) the last step computed on."""
+        t, y, x = self._span[6:].tolist()
+        return (t, y, x)
 
     # ------------------------------------------------------------ caches
     def retarget(self, dtype: torch.dtype) -> None:
@@ -66,7 +73,7 @@ class NumpyEngine:
 
     def invalidate(self) -> None:
         """Forget what was derived from the activity's contents (it was replaced)."""
-        self._arcs = None
+        self._span_key = None
         self._view = None
 
     def _act_view(self, activity: torch.Tensor) -> np.ndarray:
@@ -81,14 +88,22 @@ class NumpyEngine:
             view = self._view = (activity, activity.data_ptr(), activity.detach().numpy()[0])
         return view[2]
 
-    def _arcs_of(self, activity: torch.Tensor, act: np.ndarray) -> list[tuple[int, int]]:
+    def span_of(self, activity: torch.Tensor, act: np.ndarray) -> np.ndarray:
+        """The non-zero arcs ``(start, length)`` per axis (th, y, x) of ``act`` (the numpy
+        view of ``activity``), then the last box: the engine's own array, made again
+        when the buffer's ``(data_ptr, _version)`` changed.
+
+        Shape:
+            returns ``(9,)`` int64.
+        """
         key = (activity.data_ptr(), activity._version)
-        if self._arcs is None or self._arcs_key != key:
+        if self._span_key != key:
             nz: np.ndarray = np.not_equal(act, 0)
             t2 = np.asarray(nz.any(axis=2))
-            self._arcs = [F.arc(t2.any(axis=1)), F.arc(t2.any(axis=0)), F.arc(nz.any(axis=(0, 1)))]
-            self._arcs_key = key
-        return self._arcs
+            arcs = (F.arc(t2.any(axis=1)), F.arc(t2.any(axis=0)), F.arc(nz.any(axis=(0, 1))))
+            self._span[:6] = [v for arc in arcs for v in arc]
+            self._span_key = key
+        return self._span
 
     # ------------------------------------------------------------ tables
     def _tables(self, backwards: bool) -> tuple[np.ndarray, ...]:
@@ -114,6 +129,39 @@ class NumpyEngine:
             tab = self._geo_tables[backwards] = (coef, steps, edge, cells)
         return tab
 
+    def _tables_both(self) -> tuple[np.ndarray, ...]:
+        """:meth:`_tables` for both directions of travel stacked (forwards first)."""
+        if self._both is None:
+            fwd, back = self._tables(False), self._tables(True)
+            self._both = tuple(
+                np.ascontiguousarray(np.stack([f, b])) for f, b in zip(fwd, back, strict=True)
+            )
+        return self._both
+
+    def kernel_args(self, dtype: np.dtype) -> tuple[Any, ...]:
+        """What :func:`~torchratslam.pose_cells._frame.step_span` takes after ``act``,
+        ``span``, ``trans`` and ``rot`` (the activity's dtype ``dtype``): the
+        excitation's reach, the taps, the global inhibition, the path integration's
+        tables, find_best's tables and ``pc_cells_to_avg``."""
+        w_e, w_i, inhib = self._weights(dtype)
+        coef, steps, edge, cells = self._tables_both()
+        dec = self.decoder
+        lookups = dec.find_best_tables() if dec.cpp_decode else self._no_lookups
+        one_cell = self.motion.one_cell
+        return (
+            self._eh,
+            w_e,
+            w_i,
+            inhib,
+            coef,
+            steps,
+            one_cell,
+            edge,
+            cells,
+            lookups,
+            dec.cells_to_avg,
+        )
+
     def _weights(self, dtype: np.dtype) -> tuple[np.ndarray, np.ndarray, Any]:
         """The excitatory and inhibitory taps and ``pc_global_inhib`` in ``dtype``."""
         w = self._taps.get(dtype.char)
@@ -126,27 +174,6 @@ class NumpyEngine:
         return w
 
     # --------------------------------------------------------------- step
-    def _box(self, arcs: list[tuple[int, int]], trans: float, rot: float) -> np.ndarray:
-        """Per axis (th, y, x): the crop ``(start, length, whole ring)`` and the cells of
-        the crop the arcs hold ``(lo, hi)``, ``(3, 5)``."""
-        n_x, n_y, n_t = self.dims
-        eh = self._eh
-        m_xy = eh + (math.ceil(abs(trans)) + 1 if trans != 0 else 0)
-        m_th = eh + (math.ceil(abs(rot)) + 1 if rot != 0 else 0)
-        box = []
-        for (start, ln), n, m in ((arcs[0], n_t, m_th), (arcs[1], n_y, m_xy), (arcs[2], n_x, m_xy)):
-            if ln == 0:
-                raise InputError(
-                    "pose-cell activity is all zero; reset() or inject() before stepping"
-                )
-            if ln + 2 * m < n:
-                box.append(((start - m) % n, ln + 2 * m, 0, m, m + ln))
-            elif start + ln <= n:  # the whole ring, the arc not across its end
-                box.append((0, n, 1, start, start + ln))
-            else:
-                box.append((0, n, 1, 0, n))
-        return np.array(box, dtype=np.int64)
-
     def step(self, activity: torch.Tensor, trans: float, rot: float) -> tuple[float, float, float]:
         """One step of the network in place, on the packet's crop (one compiled call,
         :func:`~torchratslam.pose_cells._step.step_crop`).
@@ -165,39 +192,20 @@ class NumpyEngine:
         Shape:
             activity: ``(1, TH, Y, X)``.
         """
-        from torchratslam.pose_cells._step import step_crop
+        from torchratslam.pose_cells._frame import step_span
 
         act = self._act_view(activity)
-        box = self._box(self._arcs_of(activity, act), trans, rot)
-        w_e, w_i, inhib = self._weights(act.dtype)
-        coef, steps, edge, cells = self._tables(trans < 0)
-        dec = self.decoder
-        status, peak, arcs, centre = step_crop(
-            act,
-            box,
-            w_e,
-            w_i,
-            inhib,
-            float(trans),
-            float(rot),
-            coef,
-            steps,
-            self.motion.one_cell,
-            edge,
-            cells,
-            dec.find_best_tables() if dec.cpp_decode else self._no_lookups,
-            dec.cells_to_avg,
-            0,  # the crop's mass: one pairwise sum of the whole crop
+        span = self.span_of(activity, act)
+        status, peak, centre = step_span(
+            act, span, float(trans), float(rot), *self.kernel_args(act.dtype)
         )
+        if status == ALL_ZERO:
+            raise InputError("pose-cell activity is all zero; reset() or inject() before stepping")
         if status:
             raise InputError(F.DIED_OUT)
-        l_t, l_y, l_x = box[:, 1].tolist()
-        self.last_crop = (l_t, l_y, l_x)
-        s_t, a_t, s_y, a_y, s_x, a_x = arcs.tolist()
-        self._arcs = [(s_t, a_t), (s_y, a_y), (s_x, a_x)]
-        if dec.cpp_decode:
+        if self.decoder.cpp_decode:
             return centre
-        return dec.decode_one(act, peak)
+        return self.decoder.decode_one(act, peak)
 
     def inject(self, activity: torch.Tensor, th: Any, y: Any, x: Any, energy: Any) -> None:
         """Add ``energy`` at the (wrapped) cell ``(th, y, x)``, keeping the arcs cache.
@@ -211,13 +219,8 @@ class NumpyEngine:
         Shape:
             activity: ``(1, TH, Y, X)``.
         """
+        from torchratslam.pose_cells._frame import inject_cell
+
         act = self._act_view(activity)
-        key = (activity.data_ptr(), activity._version)
-        act[th, y, x] += energy
-        if energy != 0 and self._arcs is not None and self._arcs_key == key:
-            n_x, n_y, n_t = self.dims
-            cell = (int(th), int(y), int(x))
-            self._arcs = [
-                F.arc_with(span, c, n)
-                for span, c, n in zip(self._arcs, cell, (n_t, n_y, n_x), strict=True)
-            ]
+        keep = self._span_key == (activity.data_ptr(), activity._version)
+        inject_cell(act, self._span, int(th), int(y), int(x), float(energy), keep)

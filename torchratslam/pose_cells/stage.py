@@ -14,49 +14,39 @@ both arrived since the last decision.
 from __future__ import annotations
 
 import math
-from typing import Any, cast
+from typing import Any
 
 import numpy as np
 import torch
 
-from ratslam_graph.geometry import pc_distance, pc_distance_one
+from ratslam_graph.geometry import pc_distance
 from ratslam_graph.messages import Action, ActionKind
 from torchratslam.config import PoseCellParams
 from torchratslam.errors import InputError, MapFormatError
 from torchratslam.messages import ViewMatch
+from torchratslam.pose_cells import _layout as L
+from torchratslam.pose_cells.functional import DIED_OUT
 from torchratslam.pose_cells.network import PoseCellNetwork
 
 __all__ = ["RECENT_TEMPLATES", "PoseCells"]
 
-RECENT_TEMPLATES = 10
+RECENT_TEMPLATES = L.RECENT
 """Templates among the last this many learnt do not inject energy."""
 
-
-def _with_room(a: np.ndarray, n: int) -> np.ndarray:
-    """``a`` (its first ``n`` rows in use) with room for one more row (doubling)."""
-    if n < len(a):
-        return a
-    out = np.zeros((max(16, 2 * n), *a.shape[1:]), dtype=a.dtype)
-    out[:n] = a[:n]
-    return out
+_KINDS = (ActionKind.NONE, ActionKind.CREATE, ActionKind.LINK)
+_NO_ACTION = Action()
 
 
-def _nearest() -> Any:
-    """:func:`~torchratslam.pose_cells._nearest.nearest_cell` (numba, imported on first
-    use)."""
-    from torchratslam.pose_cells._nearest import nearest_cell
-
-    return nearest_cell
+_FRAME: Any = None
 
 
-def _exp(x: float) -> float:
-    """``exp(x)`` as C's: ``inf`` past the largest double, where Python raises (a
-    template seen on every frame for long enough decays past it; OpenRatSLAM's energy
-    is then -inf and nothing is injected)."""
-    try:
-        return math.exp(x)
-    except OverflowError:
-        return math.inf
+def _kernels() -> Any:
+    """:mod:`torchratslam.pose_cells._frame` (numba, imported on first use and kept)."""
+    global _FRAME
+    from torchratslam.pose_cells import _frame
+
+    _FRAME = _frame
+    return _FRAME
 
 
 class PoseCells:
@@ -67,9 +57,12 @@ class PoseCells:
     after each odometry step, decides the experience-map
     :class:`~ratslam_graph.messages.Action`.
 
-    Call :meth:`on_view_template` and :meth:`on_odometry` once per frame; as in
-    OpenRatSLAM an action is only decided once both have been received since the last
-    decision (otherwise :meth:`on_odometry` returns ``NONE``).
+    Call :meth:`on_view_template` and :meth:`on_odometry` once per frame, or
+    :meth:`on_frame` for both (one compiled call on a CPU network, what the pipeline
+    does); as in OpenRatSLAM an action is only decided once both have been received
+    since the last decision (otherwise :meth:`on_odometry` returns ``NONE``). The
+    scalars (current experience and templates, the flags, the centre) live in two small
+    arrays the compiled kernels read and write (:mod:`~torchratslam.pose_cells._layout`).
 
     Args:
         params: pose-cell parameters.
@@ -77,6 +70,16 @@ class PoseCells:
         device: torch device.
         method: dynamics method of the network (see :class:`PoseCellNetwork`).
     """
+
+    current_exp = L.Slot("_ist", L.CUR_EXP, int)
+    current_vt = L.Slot("_ist", L.CUR_VT, int)
+    prev_vt = L.Slot("_ist", L.PREV_VT, int)
+    vt_delta_pc_th = L.Slot("_fst", L.VT_DELTA, float)
+    relative_rad = L.Slot("_fst", L.REL_RAD, float)
+    _n_t = L.Slot("_ist", L.N_T, int)
+    _n_e = L.Slot("_ist", L.N_E, int)
+    _odo_update = L.Slot("_ist", L.ODO_UPD, bool)
+    _vt_update = L.Slot("_ist", L.VT_UPD, bool)
 
     def __init__(
         self,
@@ -86,17 +89,26 @@ class PoseCells:
         device: Any = None,
         method: str = "auto",
     ) -> None:
-        self.params = params if params is not None else PoseCellParams()
+        self.params = p = params if params is not None else PoseCellParams()
         self.network = PoseCellNetwork(self.params, 1, dtype=dtype, device=device, method=method)
         self.dims = self.network.dims
-        self._dims_f = (float(self.dims[0]), float(self.dims[1]), float(self.dims[2]))
+        self._ist = np.zeros(L.I_SIZE, dtype=np.int64)
+        self._fst = np.zeros(L.F_SIZE, dtype=np.float64)
+        self._ist[L.I_RULE] = p.vt_inject_rule == "openratslam"
+        self._fst[L.F_ENERGY : L.F_DIMS] = (
+            p.pc_vt_inject_energy,
+            p.vt_active_decay,
+            p.pc_vt_restore,
+            p.exp_delta_pc_threshold,
+            p.pc_cell_x_size,
+        )
+        self._fst[L.F_DIMS : L.F_DIMS + 3] = self.dims
+        self._frame_args: tuple | None = None  # see on_frame
         self._clear()
 
     def _clear(self) -> None:
         # rows [:n] of buffers with spare room (no copy of every row per new one)
-        self._set_templates(np.zeros((0, 3)), np.zeros(0))
-        self._set_experiences(np.zeros((0, 3)), np.zeros(0, dtype=np.int64))
-        self._template_exps: dict[int, list[int]] = {}
+        self._store(np.zeros((0, 3)), np.zeros(0), np.zeros((0, 3)), np.zeros(0, dtype=np.int64))
         self.current_exp = -1
         self.current_vt = -1
         self.prev_vt = -1
@@ -104,20 +116,46 @@ class PoseCells:
         self.relative_rad = 0.0
         self._odo_update = False
         self._vt_update = False
-        self._best = cast(tuple[float, float, float], tuple(float(d // 2) for d in self.dims))
+        self._best = (float(self.dims[0] // 2), float(self.dims[1] // 2), float(self.dims[2] // 2))
+
+    def __getstate__(self) -> dict[str, Any]:
+        # a copy or a pickle makes new buffers: the compiled frame's views are made again
+        return {**self.__dict__, "_frame_args": None}
 
     def reset(self) -> None:
         """Back to the start: one active cell in the middle, no templates or experiences."""
         self.network.reset()
         self._clear()
 
-    def _set_templates(self, pc: np.ndarray, decay: np.ndarray) -> None:
-        self._n_t = len(pc)
-        self._t_pc, self._t_decay = pc.astype(np.float64), decay.astype(np.float64)
+    def _store(
+        self, t_pc: np.ndarray, t_decay: np.ndarray, e_pc: np.ndarray, e_template: np.ndarray
+    ) -> None:
+        """Templates' cells and decays, experiences' cells and templates (copied), and
+        the chains of each template's experiences."""
+        self._n_t, self._n_e = len(t_pc), len(e_pc)
+        self._t_pc, self._t_decay = t_pc.astype(np.float64), t_decay.astype(np.float64)
+        self._e_pc, self._e_template = e_pc.astype(np.float64), e_template.astype(np.int64)
+        self._t_chain = np.full((len(t_pc), 2), -1, dtype=np.int64)
+        self._e_next = np.full(len(e_pc), -1, dtype=np.int64)
+        self._frame_args = None
+        self._make_room(max(len(t_pc), int(e_template.max(initial=-1)) + 1))
+        L.link_chains(e_template, self._t_chain, self._e_next)
 
-    def _set_experiences(self, pc: np.ndarray, template: np.ndarray) -> None:
-        self._n_e = len(pc)
-        self._e_pc, self._e_template = pc.astype(np.float64), template.astype(np.int64)
+    def _make_room(self, n_t: int | None = None) -> None:
+        """Free rows for one more template (and templates ``< n_t``) and one more
+        experience."""
+        n_t = self._n_t if n_t is None else max(n_t, self._n_t)
+        if n_t >= len(self._t_pc):
+            self._t_pc = L.grown(self._t_pc, n_t, 0.0)
+            self._t_decay = L.grown(self._t_decay, n_t, 0.0)
+            self._t_chain = L.grown(self._t_chain, n_t, -1)
+            self._frame_args = None
+        n_e = self._n_e
+        if n_e >= len(self._e_pc):
+            self._e_pc = L.grown(self._e_pc, n_e, 0.0)
+            self._e_template = L.grown(self._e_template, n_e, 0)
+            self._e_next = L.grown(self._e_next, n_e, -1)
+            self._frame_args = None
 
     # ------------------------------------------------------------ accessors
     @property
@@ -149,6 +187,15 @@ class PoseCells:
         return self._e_template[: self._n_e]
 
     @property
+    def _best(self) -> tuple[float, float, float]:
+        x, y, th = self._fst[L.BEST : L.BEST + 3].tolist()
+        return (x, y, th)
+
+    @_best.setter
+    def _best(self, value: tuple[float, float, float]) -> None:
+        self._fst[L.BEST : L.BEST + 3] = value
+
+    @property
     def centre(self) -> tuple[float, float, float]:
         """Packet centre ``(x, y, th)`` in cells, as decoded at the last odometry step."""
         return self._best
@@ -168,7 +215,8 @@ class PoseCells:
 
     def template_experiences(self, template_id: int) -> list[int]:
         """Experience ids learnt with ``template_id``, in creation order."""
-        return list(self._template_exps.get(int(template_id), []))
+        found: list[int] = np.flatnonzero(self.exp_template == int(template_id)).tolist()
+        return found
 
     # ---------------------------------------------------------------- input
     def on_view_template(self, match: ViewMatch) -> None:
@@ -185,44 +233,15 @@ class PoseCells:
         Raises:
             InputError: a template id that skips ahead or is negative.
         """
-        p = self.params
         vt = int(match.template_id)
-        n = self.n_templates
-        rad = float(match.relative_rad)
-        if vt < 0 or vt > n:
-            raise InputError(
-                f"view template id {vt} is invalid: {n} templates are known, so the id "
-                f"must be in 0..{n} ({n} = a new template)"
-            )
-        self.relative_rad = rad
-        if vt == n:
-            self._t_pc = _with_room(self._t_pc, n)
-            self._t_decay = _with_room(self._t_decay, n)
-            self._t_pc[n] = self._best
-            self._t_decay[n] = p.vt_active_decay
-            self._n_t = n + 1
-        elif vt < n - RECENT_TEMPLATES or (
-            p.vt_inject_rule == "openratslam" and n < RECENT_TEMPLATES
-        ):  # OpenRatSLAM's unsigned "size - 10" wraps while fewer than 10 exist
-            if vt == self.current_vt:
-                self._t_decay[vt] += p.vt_active_decay
-            energy = p.pc_vt_inject_energy / 30.0 * (30.0 - _exp(1.2 * self._t_decay[vt]))
-            if energy > 0:
-                n_th = self.dims[2]
-                self.vt_delta_pc_th = rad / (2.0 * math.pi) * n_th
-                pc_x, pc_y, pc_th = self._t_pc[vt]
-                th = pc_th + self.vt_delta_pc_th
-                if th < 0:
-                    th += n_th
-                if th >= n_th:
-                    th -= n_th
-                self.network.inject(int(pc_x), int(pc_y), int(th) % n_th, energy)
-        decay = self.template_decay  # in place: the same elementwise arithmetic
-        np.subtract(decay, p.pc_vt_restore, out=decay)
-        np.maximum(decay, p.vt_active_decay, out=decay)
-        self.prev_vt = self.current_vt
-        self.current_vt = vt
-        self._vt_update = True
+        self._make_room()
+        status, th, y, x, energy = _kernels().view_update(
+            self._ist, self._fst, self._t_pc, self._t_decay, vt, float(match.relative_rad)
+        )
+        if status:
+            _raise_for(status, self, vt, energy)
+        if energy != 0:
+            self.network.inject(x, y, th, energy)
 
     def on_odometry(self, vtrans: float, vrot: float, dt: float) -> Action:
         """Run one network step with the odometry, then decide the action.
@@ -237,7 +256,83 @@ class PoseCells:
         """
         self._best = self.network.step_one(float(vtrans), float(vrot), float(dt))
         self._odo_update = True
-        return self._decide()
+        self._make_room()
+        kind, dest, src = _kernels().decide(
+            self._ist, self._fst, self._e_pc, self._e_template, self._e_next, self._t_chain
+        )
+        if kind == 0:
+            return Action.none()
+        return Action(_KINDS[kind], dest_id=dest, src_id=src, relative_rad=self.relative_rad)
+
+    def on_frame(
+        self,
+        match: ViewMatch,
+        vtrans: float,
+        vrot: float,
+        dt: float,
+        *,
+        injection_angle: bool = False,
+    ) -> tuple[Action, tuple[float, float, float]]:
+        """:meth:`on_view_template`, then :meth:`on_odometry`, and the centre: for one
+        network on the CPU, one compiled call
+        (:func:`~torchratslam.pose_cells._frame.frame_step`), the same bits.
+
+        Args:
+            match: the frame's view template.
+            vtrans, vrot, dt: the frame's odometry (Python floats).
+            injection_angle: the action carries the last injection's angle
+                (``vt_delta_pc_th`` in radians, OpenRatSLAM's ``get_relative_rad``)
+                rather than this view's.
+
+        Returns:
+            The action and the packet centre ``(x, y, th)`` after the step.
+        """
+        bufs = self.network._buffers
+        act = bufs["activity"]
+        args = self._frame_args
+        if (
+            args is None
+            or args[0] is not act
+            or args[1] is not bufs["best"]
+            or args[2] != (act.data_ptr(), act._version)
+        ):
+            args = self._prepare_frame()
+            if args is None:  # the torch engine: the two calls
+                self.on_view_template(match)
+                action = self.on_odometry(vtrans, vrot, dt)
+                if injection_angle and action.kind != ActionKind.NONE:
+                    rad = self.vt_delta_pc_th * 2.0 * math.pi / self.dims[2]
+                    action = Action(action.kind, action.dest_id, action.src_id, rad)
+                return action, self._best
+        status, kind, dest, src, x, y, th, angle = (_FRAME or _kernels()).frame_step(
+            *args[3], match.template_id, match.relative_rad, vtrans, vrot, dt
+        )
+        if status:
+            self._make_room()
+            if status != L.GROW:
+                _raise_for(status, self, int(match.template_id), 0.0, (vtrans, vrot, dt))
+        if kind == 0:
+            return _NO_ACTION, (x, y, th)
+        rad = angle if injection_angle else self.relative_rad
+        return Action(_KINDS[kind], dest, src, rad), (x, y, th)
+
+    def _prepare_frame(self) -> tuple | None:
+        """What :meth:`on_frame` passes to the compiled frame (None: the network is not
+        one CPU network in numpy decoding as OpenRatSLAM)."""
+        net = self.network
+        eng = net._np_engine
+        act_t, best_t = net._buffers["activity"], net._buffers["best"]
+        assert act_t is not None and best_t is not None
+        if not (net.uses_numpy and eng.decoder.cpp_decode and best_t.device.type == "cpu"):
+            return None
+        self._make_room()
+        act = eng._act_view(act_t)
+        span = eng.span_of(act_t, act)
+        arrays = (self._t_pc, self._t_decay, self._e_pc, self._e_template, self._e_next)
+        args = (act, span, best_t.numpy(), self._ist, self._fst, *arrays, self._t_chain)
+        key = (act_t.data_ptr(), act_t._version)
+        self._frame_args = (act_t, best_t, key, (*args, *eng.kernel_args(act.dtype)))
+        return self._frame_args
 
     # --------------------------------------------------------------- action
     def _corrected_centre(self) -> tuple[float, float, float]:
@@ -255,54 +350,6 @@ class PoseCells:
     def _delta_pc(self, cells: np.ndarray) -> np.ndarray:
         """Distance of experience cells ``(..., 3)`` from the corrected centre."""
         return pc_distance(cells, np.array(self._corrected_centre()), self.dims)
-
-    def _create(self) -> Action:
-        src = self.current_exp
-        new = self.n_experiences
-        self._e_pc = _with_room(self._e_pc, new)
-        self._e_template = _with_room(self._e_template, new)
-        self._e_pc[new] = self._best
-        self._e_template[new] = self.current_vt
-        self._n_e = new + 1
-        self._template_exps.setdefault(self.current_vt, []).append(new)
-        self.current_exp = new
-        return Action(ActionKind.CREATE, dest_id=new, src_id=src, relative_rad=self.relative_rad)
-
-    def _decide(self) -> Action:
-        if not (self._odo_update and self._vt_update):
-            return Action.none()
-        self._odo_update = self._vt_update = False
-        if self.n_templates == 0:
-            return Action.none()
-        if self.n_experiences == 0:
-            return self._create()
-        exps = self._template_exps.get(self.current_vt, [])
-        if not exps:
-            return self._create()
-        threshold = self.params.exp_delta_pc_threshold
-        d_current = pc_distance_one(
-            self._e_pc[self.current_exp].tolist(), self._corrected_centre(), self.dims
-        )
-        if d_current > threshold or self.current_vt != self.prev_vt:
-            # the first nearest, as OpenRatSLAM's strict '<' (pc_distance's arithmetic)
-            k, d = _nearest()(
-                self._e_pc,
-                np.array(exps, dtype=np.int64),
-                self.current_exp,
-                self._corrected_centre(),
-                self._dims_f,
-            )
-            if k >= 0 and d < threshold:
-                src = self.current_exp
-                self.current_exp = int(k)
-                return Action(
-                    ActionKind.LINK,
-                    dest_id=self.current_exp,
-                    src_id=src,
-                    relative_rad=self.relative_rad,
-                )
-            return self._create()
-        return Action.none()
 
     # ---------------------------------------------------------------- state
     def get_state(self) -> dict[str, Any]:
@@ -384,11 +431,7 @@ class PoseCells:
         self.reset()
         if activity.size:
             self.network.set_activity(activity)
-        self._set_templates(tpc, decay)
-        self._set_experiences(epc, etpl)
-        self._template_exps = {}
-        for i, t in enumerate(etpl.tolist()):  # restore only, not a hot path
-            self._template_exps.setdefault(int(t), []).append(i)
+        self._store(tpc, decay, epc, etpl)
         self.current_exp = current_exp
         self.current_vt = int(state.get("current_vt", -1))
         self.prev_vt = int(state.get("prev_vt", -1))
@@ -406,3 +449,26 @@ class PoseCells:
             x, y, th = (int(v) % d for v, d in zip(epc[current_exp], self.dims, strict=True))
             self.network.place_packet(x, y, th)
         self.network.set_centre(self._best)
+
+
+def _raise_for(
+    status: int, pcs: PoseCells, vt: int, energy: float, odometry: tuple[float, ...] = ()
+) -> None:
+    """Raise what the separate calls raise for a compiled frame's error ``status``."""
+    if status == L.BAD_ID:
+        n = pcs.n_templates
+        raise InputError(
+            f"view template id {vt} is invalid: {n} templates are known, so the id "
+            f"must be in 0..{n} ({n} = a new template)"
+        )
+    if status == L.BAD_CELL:  # int() of the template's cell raises, as it did
+        cell = pcs.template_pc[vt].tolist()
+        int(cell[0]), int(cell[1]), int(cell[2] + pcs.vt_delta_pc_th)
+    if status == L.BAD_ENERGY:
+        raise InputError(f"injected energy must be finite, got {energy}")
+    if status == L.BAD_ODOMETRY:
+        vtrans, vrot, dt = odometry
+        raise InputError(f"odometry must be finite, got vtrans={vtrans}, vrot={vrot}, dt={dt}")
+    if status == L.ALL_ZERO:
+        raise InputError("pose-cell activity is all zero; reset() or inject() before stepping")
+    raise InputError(DIED_OUT)

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from ratslam_graph.errors import GraphError
 from ratslam_graph.experience_map import ExperienceMap
 from ratslam_graph.messages import Action, ActionKind
 from ratslam_graph.params import ExperienceMapParams
@@ -97,3 +98,34 @@ def test_a_map_with_its_own_apply_gets_every_frame():
     assert em.seen == [int(f[2].kind) for f in steps]  # the frames without an action too
     assert ActionKind.NONE in em.seen
     assert same_map(em, ref)
+
+
+def test_an_action_the_compiled_frame_refuses_goes_the_python_way():
+    fast, slow = ExperienceMap(), ExperienceMap()
+    steps = list(frames(4, 30))
+    for f in steps:
+        assert stage(fast, *f) == one_by_one(slow, *f)
+    bad = (30, (0.5, 0.1, 0.1), Action(ActionKind.LINK, dest_id=len(fast) + 3), (1.0, 2.0, 3.0), 1)
+    errors = []
+    for em, run in ((fast, stage), (slow, one_by_one)):
+        with pytest.raises(GraphError) as info:
+            run(em, *bad)
+        errors.append((type(info.value), str(info.value)))
+    assert errors[0] == errors[1]
+    assert same_map(fast, slow)
+
+
+def test_the_stage_follows_new_settings_of_the_map():
+    first = ExperienceMapParams(exp_relax="on_action")
+    later = (
+        ExperienceMapParams(exp_relax="every_frame", exp_loops=3),
+        ExperienceMapParams(exp_relax="on_action", exp_link_averaging=True),  # not compiled
+        first,
+    )
+    fast, slow = ExperienceMap(first), ExperienceMap(first)
+    for f in frames(5, 160):
+        if f[0] in (39, 79, 119):
+            for em in (fast, slow):
+                em.params = later[f[0] // 40]
+        assert stage(fast, *f) == one_by_one(slow, *f)
+    assert same_map(fast, slow)
