@@ -118,7 +118,7 @@ class TemplateView(nn.Module):
 
     def __len__(self) -> int:
         bank = self._modules.get("bank")  # not through nn.Module's __getattr__: every frame
-        return 0 if bank is None else len(bank)
+        return 0 if bank is None else len(cast(TemplateBank, bank))
 
     @property
     def offsets(self) -> torch.Tensor:
