@@ -69,6 +69,23 @@ def small_run(_small_run_once, tmp_path) -> SmallRun:
 
 
 @pytest.fixture(scope="session")
+def loop_params() -> dict:
+    """The config keys the pipeline tests run the loop with (a map that closes it)."""
+    return dict(
+        template_x_size=64,
+        template_y_size=16,
+        vt_panoramic=1,
+        vt_shift_match=4,
+        vt_step_match=1,
+        vt_match_threshold=0.06,
+        pc_dim_xy=21,
+        pc_cell_x_size=0.25,
+        pc_vt_inject_energy=0.1,
+        exp_delta_pc_threshold=2,
+    )
+
+
+@pytest.fixture(scope="session")
 def loop_frames() -> list:
     """Two laps of the simulated loop, 400 frames."""
     from torchratslam.sim import get_tour

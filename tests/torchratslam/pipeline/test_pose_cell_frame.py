@@ -8,19 +8,6 @@ from torchratslam.config import load_config
 from torchratslam.pipeline import RatSLAM
 from torchratslam.pose_cells.stage import PoseCells
 
-PARAMS = dict(  # the pipeline tests' loop (a map that closes it)
-    template_x_size=64,
-    template_y_size=16,
-    vt_panoramic=1,
-    vt_shift_match=4,
-    vt_step_match=1,
-    vt_match_threshold=0.06,
-    pc_dim_xy=21,
-    pc_cell_x_size=0.25,
-    pc_vt_inject_energy=0.1,
-    exp_delta_pc_threshold=2,
-)
-
 
 class TwoCalls(PoseCells):
     """``PoseCells`` that the pipeline drives by ``on_view_template`` + ``on_odometry``."""
@@ -30,11 +17,13 @@ class TwoCalls(PoseCells):
 
 
 @pytest.mark.parametrize("action_angle", ["injection", "view"])
-def test_the_pipeline_with_on_frame_is_the_pipeline_with_the_two_calls(loop_frames, action_angle):
+def test_the_pipeline_with_on_frame_is_the_pipeline_with_the_two_calls(
+    loop_frames, loop_params, action_angle
+):
     frames = loop_frames[:240]
     runs = []
     for pose_cells in (None, TwoCalls):
-        cfg = load_config(None, **PARAMS, action_angle=action_angle)
+        cfg = load_config(None, **loop_params, action_angle=action_angle)
         slam = RatSLAM(cfg, pose_cells=pose_cells)
         results = [slam.step_frame(f) for f in frames]
         runs.append((slam, results))

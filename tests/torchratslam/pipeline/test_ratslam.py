@@ -265,34 +265,11 @@ def test_time_logger_statistics_and_threads():
 
 
 # ----------------------------------------------------------------------------- end to end
-REFERENCE_PARAMS = dict(
-    template_x_size=64,
-    template_y_size=16,
-    vt_panoramic=1,
-    vt_shift_match=4,
-    vt_step_match=1,
-    vt_match_threshold=0.06,
-    pc_dim_xy=21,
-    pc_cell_x_size=0.25,
-    pc_vt_inject_energy=0.1,
-    exp_delta_pc_threshold=2,
-    exp_loops=20,
-)
-
-
 @pytest.fixture(scope="module")
-def loop_frames():
-    from torchratslam.sim import get_tour
-
-    session = get_tour("loop", laps=2, frames=400).full()
-    return list(session.frames())
-
-
-@pytest.fixture(scope="module")
-def sequential_run(loop_frames):
+def sequential_run(loop_frames, loop_params):
     from torchratslam.config import load_config
 
-    slam = RatSLAM(load_config(None, **REFERENCE_PARAMS))
+    slam = RatSLAM(load_config(None, **loop_params, exp_loops=20))
     result = slam.run(loop_frames, progress=False)
     return slam, result
 
@@ -326,11 +303,11 @@ def test_end_to_end_the_loop_closes(sequential_run, loop_frames):
     assert slam.graph.number_of_nodes() == result.experiences
 
 
-def test_end_to_end_pipelined_equals_sequential(sequential_run, loop_frames):
+def test_end_to_end_pipelined_equals_sequential(sequential_run, loop_frames, loop_params):
     from torchratslam.config import load_config
 
     seq, res = sequential_run
-    slam = RatSLAM(load_config(None, **REFERENCE_PARAMS), pipelined=True)
+    slam = RatSLAM(load_config(None, **loop_params, exp_loops=20), pipelined=True)
     got = []
     res_p = slam.run(iter(loop_frames), progress=False, callback=got.append)
     assert res_p.pipelined and [r.frame for r in got] == list(range(len(loop_frames)))
@@ -376,7 +353,7 @@ def test_step_with_visual_odometry_estimates_the_turn():
     assert r.odometry[2] == pytest.approx(0.5) and r.t == pytest.approx(0.5)
 
 
-def test_same_input_and_config_give_the_same_map(tmp_path):
+def test_same_input_and_config_give_the_same_map(tmp_path, loop_params):
     """Determinism end to end: frames re-simulated from the seed, two fresh systems, the
     same templates, activity, experience poses, links and saved state, bit for bit."""
     from torchratslam.config import load_config
@@ -387,7 +364,7 @@ def test_same_input_and_config_give_the_same_map(tmp_path):
     runs = []
     for k in range(2):
         frames = get_tour("loop", laps=1, frames=150, seed=3).full().frames()
-        slam = RatSLAM(load_config(None, **REFERENCE_PARAMS))
+        slam = RatSLAM(load_config(None, **loop_params, exp_loops=20))
         slam.run(frames, progress=False)
         save_state(slam, tmp_path / f"run{k}")
         runs.append(slam)
@@ -399,7 +376,7 @@ def test_same_input_and_config_give_the_same_map(tmp_path):
     assert all(np.array_equal(links_a[k], links_b[k]) for k in links_a)
     assert load_state(tmp_path / "run0").equals(load_state(tmp_path / "run1"))
     # and a different seed really gives different data (the check can fail)
-    other = RatSLAM(load_config(None, **REFERENCE_PARAMS))
+    other = RatSLAM(load_config(None, **loop_params, exp_loops=20))
     other.run(get_tour("loop", laps=1, frames=150, seed=4).full().frames(), progress=False)
     assert not torch.equal(other.templates[: len(a.templates)], a.templates[: len(other.templates)])
 
