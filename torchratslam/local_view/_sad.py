@@ -144,8 +144,12 @@ def search_normal(  # pragma: no cover - compiled
     lower bounds of the pair's SAD by the triangle inequality, each tighter than the
     last; then, if both are within the cut, the float64 SAD itself, row by row with
     early exit. The hint template goes first (its error
-    sets a tight cut early), then every template in id order. It only screens: the
-    pairs it returns are evaluated again exactly by the caller.
+    sets a tight cut early), then every template in id order. Within a block, the
+    column bounds of the pairs the first bound keeps are computed in one pass before
+    the pairs are visited (the loads overlap instead of waiting on each decision); each
+    pair is still decided at its turn with the cut of that moment, so what is kept and
+    ``pruned`` are what visiting pair by pair gives. It only screens: the pairs it
+    returns are evaluated again exactly by the caller.
 
     Args:
         data: the bank's rows, ``(capacity, Y, X)``.
@@ -198,6 +202,10 @@ def search_normal(  # pragma: no cover - compiled
     slack = eps * vsum
     bound = np.empty((kk, PAIR_BLOCK), np.float32)
     least = np.empty(PAIR_BLOCK, np.float32)
+    cand_i = np.empty(PAIR_BLOCK * kk, np.int64)
+    cand_k = np.empty(PAIR_BLOCK * kk, np.int64)
+    cand_b = np.empty(PAIR_BLOCK * kk, np.float64)
+    cand_c = np.empty(PAIR_BLOCK * kk, np.float64)
     out_t = np.empty(n * kk, np.int64)
     out_k = np.empty(n * kk, np.int64)
     out_s = np.empty(n * kk, np.float64)
@@ -214,45 +222,63 @@ def search_normal(  # pragma: no cover - compiled
             t0, t1 = blk0, min(blk0 + PAIR_BLOCK, n)
         pair_bounds(pairs_t, t0, t1, v32, bases, bound, least)
         # a template whose every pair bound is above the cut is skipped whole (the cut
-        # only falls, so it would be skipped later in the block too)
+        # only falls, so it would be skipped later in the block too); the other
+        # templates' pairs within the cut are listed in visiting order (the rest lower
+        # ``pruned`` as they would at their turn), their column bounds computed in one
+        # pass without branches (the loads overlap), then visited
         cut0 = min(best, cap) + margin
-        skip = np.zeros(t1 - t0, np.bool_)
+        nc = 0
         for i in range(t1 - t0):
+            if blk0 >= 0 and first and t0 + i == hint:
+                continue
             b = np.float64(least[i]) * keep - slack
             if b > cut0 and b < np.inf:
-                skip[i] = True
-                if b < pruned and not (blk0 >= 0 and first and t0 + i == hint):
+                if b < pruned:
                     pruned = b
-        for t in range(t0, t1):
-            if skip[t - t0] or (blk0 >= 0 and first and t == hint):
                 continue
             for ki in range(kk):
-                cut = min(best, cap) + margin
-                b = np.float64(bound[ki, t - t0]) * keep - slack
-                if b > cut and b < np.inf:
-                    if b < pruned:
-                        pruned = b
-                    continue
-                o = offsets[ki]
-                b = 0.0
-                win = cols[t, o : o + width]
-                for c in range(width):
-                    b += abs(win[c] - vcols[c])
-                if b > cut:
-                    if b < pruned:
-                        pruned = b
-                    continue
-                s = early_sad(data, t, view, o, False, width, shift, cut)
-                if s > cut:
-                    if s - margin < pruned:
-                        pruned = s - margin
-                    continue
-                out_t[m] = t
-                out_k[m] = ki
-                out_s[m] = s
-                m += 1
-                if s < best:
-                    best = s
+                b = np.float64(bound[ki, i]) * keep - slack
+                out = b > cut0 and b < np.inf
+                if out and b < pruned:
+                    pruned = b
+                cand_i[nc] = i
+                cand_k[nc] = ki
+                cand_b[nc] = b
+                nc += not out
+        for c in range(nc):
+            t = t0 + cand_i[c]
+            o = offsets[cand_k[c]]
+            cb = 0.0
+            win = cols[t, o : o + width]
+            for cc in range(width):
+                cb += abs(win[cc] - vcols[cc])
+            cand_c[c] = cb
+        for c in range(nc):
+            t = t0 + cand_i[c]
+            ki = cand_k[c]
+            cut = min(best, cap) + margin
+            b = cand_b[c]
+            if b > cut and b < np.inf:
+                if b < pruned:
+                    pruned = b
+                continue
+            b = cand_c[c]
+            if b > cut:
+                if b < pruned:
+                    pruned = b
+                continue
+            o = offsets[ki]
+            s = early_sad(data, t, view, o, False, width, shift, cut)
+            if s > cut:
+                if s - margin < pruned:
+                    pruned = s - margin
+                continue
+            out_t[m] = t
+            out_k[m] = ki
+            out_s[m] = s
+            m += 1
+            if s < best:
+                best = s
         blk0 = 0 if blk0 < 0 else t1
     return out_t, out_k, out_s, m, best, pruned
 

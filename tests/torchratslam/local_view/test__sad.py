@@ -156,6 +156,104 @@ def test_normal_search_over_several_blocks_keeps_the_best_and_skips_the_hint_onc
             assert len(pairs) == len(set(pairs))  # no pair screened twice (the hint)
 
 
+def _visit_pairs(bank_np, view, m, hint, cap, margin):
+    """Normal mode's screen written pair by pair: the hint alone, then blocks of
+    :data:`PAIR_BLOCK` templates; a template whose least pair bound is above the cut at
+    the block's start is skipped; each other pair is decided at its turn with the cut of
+    that moment (pair bound, column bound, SAD row by row with early exit)."""
+    n, y, x = bank_np.shape
+    w, shift, offs = m.width, m.shift, m.offsets_np
+    nb = w // 2
+    v = view.astype(np.float64)
+    vcols = v[:, shift : shift + w].sum(0)
+    vpairs = vcols[0::2][:nb] + vcols[1::2][:nb]
+    eps = 2.0 * (nb + 4) * 2.0**-24
+    slack = eps * float(np.abs(vpairs).sum())
+    half = x // 2
+    bases = np.array([(o % 2) * half + o // 2 for o in offs], np.int64)
+    pairs_t = np.empty((2 * half, n), np.float32)
+    cols = bank_np.astype(np.float64).sum(1)
+    for t in range(n):  # sums of adjacent column pairs, from even then odd columns
+        c = cols[t]
+        pairs_t[:half, t] = c[0 : 2 * half : 2] + c[1 : 2 * half : 2]
+        pairs_t[half:, t] = np.append(c[1 : 2 * half - 1 : 2] + c[2 : 2 * half : 2], 0.0)
+    bound = np.empty((len(offs), n), np.float32)
+    least = np.empty(n, np.float32)
+    pair_bounds(pairs_t, 0, n, vpairs.astype(np.float32), bases, bound, least)
+    best, pruned, kept = math.inf, math.inf, []
+
+    def visit(t, k):
+        nonlocal best, pruned
+        cut = min(best, cap) + margin
+        b = float(bound[k, t]) * (1.0 - eps) - slack
+        if cut < b < math.inf:
+            pruned = min(pruned, b)
+            return
+        o = offs[k]
+        b = float(np.abs(cols[t, o : o + w] - vcols).sum())
+        if b > cut:
+            pruned = min(pruned, b)
+            return
+        s = 0.0
+        for r in range(y):
+            s += float(np.abs(bank_np[t, r, o : o + w] - v[r, shift : shift + w]).sum())
+            if s > cut:
+                pruned = min(pruned, s - margin)
+                return
+        kept.append((t, k))
+        best = min(best, s)
+
+    blocks = [(hint, hint + 1)] if 0 <= hint < n else []
+    blocks += [(t0, min(t0 + PAIR_BLOCK, n)) for t0 in range(0, n, PAIR_BLOCK)]
+    for bi, (t0, t1) in enumerate(blocks):
+        cut0 = min(best, cap) + margin
+        for t in range(t0, t1):
+            if t == hint and (bi > 0 or t1 - t0 > 1):
+                continue
+            b = float(least[t]) * (1.0 - eps) - slack
+            if cut0 < b < math.inf:
+                pruned = min(pruned, b)
+                continue
+            for k in range(len(offs)):
+                visit(t, k)
+    return kept, best, pruned
+
+
+@pytest.mark.parametrize("cap", [math.inf, 0.04])
+def test_normal_search_decides_each_pair_at_its_turn_as_a_loop_does(cap):
+    """The compiled screen keeps the pairs a pair-by-pair loop keeps, in its order, and
+    its least skipped bound is the loop's: the cut falls inside blocks (near-copies of
+    the view late in the first and second blocks), so a pair is decided with the cut of
+    its turn, not of its block's start."""
+    rng = np.random.default_rng(21)
+    y, x, shift, n = 2, 10, 2, 2 * PAIR_BLOCK + 37
+    bank_np = rng.random((n, y, x))
+    m = TemplateMatcher(y, x, panoramic=False, shift=shift, step=1)
+    bank = m.make_bank(dtype=torch.float64, device=None)
+    views = []
+    for far, near in ((PAIR_BLOCK - 40, PAIR_BLOCK - 3), (PAIR_BLOCK + 50, 2 * PAIR_BLOCK + 9)):
+        v = rng.random((y, x))
+        bank_np[far] = v + 0.02 * rng.standard_normal((y, x))  # a good match first
+        bank_np[near] = v + 0.002 * rng.standard_normal((y, x))  # then a better one
+        views.append(v)
+    views.append(rng.random((y, x)))  # unrelated
+    bank.append(torch.from_numpy(bank_np))
+    margin = 1e-9 * m.npix
+    for view in views:
+        for hint in (-1, 3, PAIR_BLOCK + 7):
+            pt, pk, _, k, best, pruned = search_normal(
+                bank.array("data"), bank.array("cols"), bank.column_major("pairs", np.float32),
+                n, view, m.offsets_np, m.width, m.shift, hint, math.inf, cap * m.npix, margin,
+            )  # fmt: skip
+            kept, want_best, want_pruned = _visit_pairs(
+                bank_np, view, m, hint, cap * m.npix, margin
+            )
+            assert list(zip(pt[:k].tolist(), pk[:k].tolist())) == kept
+            assert best == pytest.approx(want_best, rel=1e-12)
+            assert pruned == pytest.approx(want_pruned, rel=1e-12)
+            assert len(kept) > 1 or cap < math.inf  # the cut fell at least once
+
+
 def test_pair_bounds_in_float32_and_a_value_out_of_range_poisons_the_least():
     rng = np.random.default_rng(6)
     pairs_t = (rng.random((8, 20)) * 4).astype(np.float32)
