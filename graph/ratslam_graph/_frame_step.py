@@ -45,6 +45,9 @@ FIXED = 8
 FALLBACK = -1
 """Returned when a value the Python path would refuse (not finite) is met before
 anything but the odometry changed: the caller runs the Python path for the action."""
+GROW = -2
+"""Returned, nothing changed, when the action needs a row that an array lacks: the
+caller makes room and calls again."""
 
 
 @njit_cached(nogil=True, inline="always")
@@ -181,7 +184,6 @@ def frame_step(
     beh: int,
     n: int,
     e: int,
-    ref_n: int,
     flags: int,
     loops: int,
     correction: float,
@@ -191,9 +193,11 @@ def frame_step(
     Args:
         fs: ``[accum_x, accum_y, accum_facing, accum_time, relative_rad]``.
         ist: ``[current_id, prev_id]``.
-        pose .. out_next: the map's arrays, with room for one more experience and link.
+        pose .. out_next: the map's arrays (an action needs room for one more
+            experience and link).
         order, rsrc, rdst, rlink: the links in OpenRatSLAM's order (creation rows,
-            sources, targets, values), current, ``ref_n`` rows in use, room for one more.
+            sources, targets, values), current (``e`` rows in use; an action needs room
+            for one more).
         vtrans, vrot, dt: the odometry; flags bit 1: apply it.
         kind, dest, rel, beh: the action, its target, relative angle and behaviour.
         n, e: experiences and links in use.
@@ -202,9 +206,17 @@ def frame_step(
         loops, correction: ``exp_loops``, ``exp_correction``.
 
     Returns:
-        :data:`FALLBACK`, or the bits :data:`NODE_ADDED`, :data:`LINK_ADDED`,
-        :data:`RELAXED`, :data:`FIXED`.
+        :data:`GROW`, :data:`FALLBACK`, or the bits :data:`NODE_ADDED`,
+        :data:`LINK_ADDED`, :data:`RELAXED`, :data:`FIXED`.
     """
+    if kind != 0 and (
+        n >= min(pose.shape[0], out_ends.shape[0])
+        or e >= min(src.shape[0], dst.shape[0], link.shape[0], meas.shape[0], counts.shape[0])
+        or e >= min(behaviour.shape[0], edge_dirty.shape[0], out_next.shape[0])
+        or e >= min(order.shape[0], rsrc.shape[0], rdst.shape[0], rlink.shape[0])
+    ):
+        return GROW
+    ref_n = e  # the order is current: one row a link
     if flags & 1:
         odometry(fs, vtrans, vrot, dt)
     cur = ist[0]

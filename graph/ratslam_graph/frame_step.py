@@ -8,8 +8,13 @@ link removal by confidence and the pose cells' create rule, OpenRatSLAM's settin
 the default's, and no subclass's own ``on_odometry``, ``apply`` or ``iterate``. The map
 is then the Python path's bit for bit (the same operations in the
 same order, tested against it and the C++ traces); what is left here is bookkeeping that
-costs no loop: counters, the graph's pending nodes and links. Anything else, and any
+costs no loop: the counters, a new experience's attributes. Anything else, and any
 action the Python path would refuse, goes the Python way.
+
+What the compiled call is given of a map (its arrays, the links in OpenRatSLAM's order,
+the settings' flags) is kept on the map (:class:`FrameArgs`, :func:`frame_args`) while
+its store's ``layout``, its ``params`` and its backend are the same objects, so a frame
+costs the call and a few attribute reads.
 """
 
 from __future__ import annotations
@@ -22,10 +27,12 @@ from ratslam_graph.messages import Action, ActionKind
 if TYPE_CHECKING:
     from ratslam_graph.experience_map import ExperienceMap
 
-__all__ = ["compiled_frame", "run_frame", "step_frame"]
+__all__ = ["FrameArgs", "compiled_frame", "frame_args", "run", "run_frame", "step_frame"]
 
 
 _KERNEL: Any = None
+_NO_ODOMETRY = (0.0, 0.0, 0.0)
+_CREATE = int(ActionKind.CREATE)
 
 
 def _kernel() -> Any:
@@ -65,6 +72,83 @@ def compiled_frame(em: ExperienceMap) -> bool:
     return ok
 
 
+class FrameArgs:
+    """What the compiled frame is given of one map, kept on it (``em._frame_args``) and
+    valid while its store's ``layout``, its ``params`` and its backend are the same
+    (:func:`frame_args` checks).
+
+    Attributes:
+        layout, params, backend: what it was made for.
+        compiled: :func:`compiled_frame`.
+        own_step: the map's class keeps :meth:`ExperienceMap.step_frame` (the pipeline may
+            take its frames here without calling it).
+        relax_every: ``exp_relax == "every_frame"``.
+        arrays: the kernel's array arguments (accumulators, ids, the store's arrays, the
+            links in OpenRatSLAM's order).
+        ref: that order (current).
+        flags: the settings' bits of the kernel's ``flags``.
+        loops, correction: ``exp_loops``, ``exp_correction``.
+        ids: ``(id(params), id(backend))``, the tail of the map's fixed-point stamp.
+    """
+
+    __slots__ = (
+        "arrays",
+        "backend",
+        "compiled",
+        "correction",
+        "flags",
+        "ids",
+        "layout",
+        "loops",
+        "own_step",
+        "params",
+        "ref",
+        "relax_every",
+    )
+
+    def __init__(self, em: ExperienceMap) -> None:
+        from ratslam_graph.experience_map import ExperienceMap
+
+        self.compiled = compiled = compiled_frame(em)  # (may make the backend)
+        p, s = em.params, em.store
+        self.params, self.backend = p, em._backend
+        self.ids = (id(p), id(self.backend))
+        self.own_step = compiled and type(em).step_frame is ExperienceMap.step_frame
+        self.relax_every = p.exp_relax == "every_frame"
+        self.flags = p.exp_first_at_origin << 3 | (p.exp_link_time == "per_link") << 4
+        self.loops, self.correction = int(p.exp_loops), float(p.exp_correction)
+        self.ref = ref = s._reference()  # (may renew the layout: read after)
+        self.arrays = (
+            em._fs,
+            em._ist,
+            s.pose,
+            s.src,
+            s.dst,
+            s.link,
+            s.meas,
+            s.counts,
+            s.behaviour,
+            s.edge_dirty,
+            s.out_ends,
+            s.out_next,
+            *ref.buffers,
+        )
+        self.layout = s.layout
+
+
+def frame_args(em: ExperienceMap) -> FrameArgs:
+    """``em``'s :class:`FrameArgs`, made again when it is stale."""
+    c = em._frame_args
+    if (
+        c is None
+        or c.layout != em.store.layout
+        or c.params is not em.params
+        or c.backend is not em._backend
+    ):
+        c = em._frame_args = FrameArgs(em)
+    return c
+
+
 def run_frame(
     em: ExperienceMap,
     odo: tuple[float, float, float] | None,
@@ -80,29 +164,14 @@ def run_frame(
     """:meth:`ExperienceMap.step_frame`: the compiled call when :func:`compiled_frame`
     allows it and the action is one it takes, else ``on_odometry``, ``apply`` and
     ``iterate``."""
-    kw = {"frame": frame, "t": t, "pc": pc, "template_id": template_id, "behaviour": behaviour}
-    if compiled_frame(em) and step_frame(em, odo, action, relax=relax, **kw):
+    c = frame_args(em)
+    if c.compiled and run(em, c, odo, action, frame, t, pc, template_id, behaviour, relax):
         return
     if odo is not None:
         em.on_odometry(*odo)
-    em.apply(action, **kw)
+    em.apply(action, frame=frame, t=t, pc=pc, template_id=template_id, behaviour=behaviour)
     if relax:
         em.iterate()
-
-
-def _checked(em: ExperienceMap, action: Action, pc: Any) -> tuple[float, ...] | None:
-    """The pose-cell coordinates as floats if the action is one the Python path takes
-    without complaint (its target exists, a created experience's coordinates are
-    finite); None otherwise."""
-    kind, dest, n = int(action.kind), int(action.dest_id), em.store.n
-    if kind == ActionKind.CREATE:
-        if dest not in (-1, n) or not isinstance(pc, tuple) or len(pc) != 3:
-            return None
-        pcv = (float(pc[0]), float(pc[1]), float(pc[2]))
-        return pcv if all(map(math.isfinite, pcv)) else None
-    if kind != ActionKind.NONE and not 0 <= dest < n:
-        return None
-    return ()
 
 
 def step_frame(
@@ -118,56 +187,72 @@ def step_frame(
     relax: bool,
 ) -> bool:
     """One frame in one compiled call; False (nothing done) when the Python path must
-    take it (see the module's text)."""
-    pcv = _checked(em, action, pc)
-    if pcv is None:
+    take it (see the module's text; the caller has checked :func:`compiled_frame`)."""
+    return run(em, frame_args(em), odo, action, frame, t, pc, template_id, behaviour, relax)
+
+
+def _created_pc(pc: Any) -> tuple[float, float, float] | None:
+    """A created experience's pose-cell coordinates as floats if the Python path takes
+    them without complaint (three finite values in a tuple); None otherwise."""
+    if not isinstance(pc, tuple) or len(pc) != 3:
+        return None
+    pcv = (float(pc[0]), float(pc[1]), float(pc[2]))
+    return pcv if all(map(math.isfinite, pcv)) else None
+
+
+def run(
+    em: ExperienceMap,
+    c: FrameArgs,
+    odo: tuple[float, float, float] | None,
+    action: Action,
+    frame: int,
+    t: float,
+    pc: Any,
+    template_id: int,
+    behaviour: int,
+    relax: bool,
+) -> bool:
+    """:func:`step_frame` with ``em``'s current :class:`FrameArgs` (positional, for the
+    pipeline's stage): False, nothing done, when the Python path must take the frame
+    (the action's target does not exist, a created experience's coordinates are not
+    three finite values)."""
+    s = em.store
+    n, kind, dest = s.n, int(action.kind), int(action.dest_id)
+    pcv: tuple[float, ...] = ()
+    if kind == _CREATE:
+        checked = _created_pc(pc)
+        if checked is None or (dest != -1 and dest != n):
+            return False
+        pcv = checked
+    elif kind and not 0 <= dest < n:
         return False
-    k = _KERNEL or _kernel()
-    s, p, backend = em.store, em.params, em.backend
-    n, e = s.n, s.e
-    kind = int(action.kind)
-    fixed = em._fixed_at == (s.version, id(p), id(backend))
-    if not kind and (not relax or fixed or n < 2 or e == 0 or p.exp_loops == 0):
+    e = s.e
+    fixed = em._fixed_at == (s.version, *c.ids)
+    if not kind and (not relax or fixed or n < 2 or e == 0 or c.loops == 0):
         if odo is not None:  # odometry alone: the Python path costs less than a call
             em.on_odometry(*odo)
         return True
-    if kind:
-        s.reserve(1, 1)
-    ref = s._reference()
-    ref.reserve()
-    flags = (
-        (odo is not None)
-        | relax << 1
-        | fixed << 2
-        | p.exp_first_at_origin << 3
-        | (p.exp_link_time == "per_link") << 4
-    )
-    out = k.frame_step(
-        em._fs,
-        em._ist,
-        s.pose,
-        s.src,
-        s.dst,
-        s.link,
-        s.meas,
-        s.counts,
-        s.behaviour,
-        s.edge_dirty,
-        s.out_ends,
-        s.out_next,
-        *ref.buffers,
-        *((0.0, 0.0, 0.0) if odo is None else odo),
+    k = _KERNEL or _kernel()
+    flags = c.flags | (odo is not None) | relax << 1 | fixed << 2
+    vals = (
+        *(_NO_ODOMETRY if odo is None else odo),
         kind,
-        int(action.dest_id),
+        dest,
         float(action.relative_rad),
-        int(behaviour),
+        behaviour,
         n,
         e,
-        ref.n,
         flags,
-        p.exp_loops,
-        float(p.exp_correction),
+        c.loops,
+        c.correction,
     )
+    out = k.frame_step(*c.arrays, *vals)
+    if out == k.GROW:  # nothing changed: room for the action, and again
+        s.reserve_frame()
+        c = frame_args(em)
+        out = k.frame_step(*c.arrays, *vals)
+        if out == k.GROW:  # (cannot happen: every array has the room now)
+            return False
     if out == k.FALLBACK:  # the odometry is in; the Python path raises as it always has
         em.apply(action, frame=frame, t=t, pc=pc, template_id=template_id, behaviour=behaviour)
         if relax:
@@ -176,12 +261,11 @@ def step_frame(
     if out & k.NODE_ADDED:
         s.node_added(pcv, template_id, frame, t)
     if out & k.LINK_ADDED:
-        ref.n += 1
-        s.link_added(ref)
+        s.link_added(c.ref)
     if out & k.RELAXED:
         s.poses_changed()
         if out & k.FIXED:
-            em._fixed_at = (s.version, id(p), id(backend))
+            em._fixed_at = (s.version, *c.ids)
         else:
             em._not_converged()
     return True

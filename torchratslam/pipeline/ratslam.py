@@ -23,7 +23,7 @@ from torchratslam.config import RatSLAMConfig
 from torchratslam.errors import InputError
 from torchratslam.messages import Frame, SessionState, ViewMatch
 from torchratslam.pipeline.checks import as_config, check_device, check_odometry_step
-from torchratslam.pipeline.em_stage import experience_map_step
+from torchratslam.pipeline.em_stage import compiled_step, general_step
 from torchratslam.pipeline.history import History
 from torchratslam.pipeline.results import RunResult, StepResult
 from torchratslam.pipeline.runner import RunProgress, open_frames, parked_gc
@@ -242,9 +242,15 @@ class RatSLAM:
         behaviour: int | None = None,
     ) -> int:
         with self.timings.section("experience_map"):
-            return experience_map_step(
-                self.experience_map,
-                None if self._skips_odometry(index) else odo,
+            # experience_map_step, what it needs worked out only where it is needed
+            em = self.experience_map
+            moved = odo if index or not self._skips_odometry(index) else None
+            current = compiled_step(em, moved, action, index, frame.t, pc, view.template_id, behaviour)
+            if current is not None:
+                return current
+            return general_step(
+                em,
+                moved,
                 action,
                 frame=index,
                 t=float(frame.t),
