@@ -29,6 +29,7 @@ import numpy as np
 
 from ratslam_graph._jit import njit_cached
 from ratslam_graph.backends._sweep import insert_link, sweep
+from ratslam_graph.frame_step import FALLBACK, FIXED, GROW, LINK_ADDED, NODE_ADDED, RELAXED
 
 PI = math.pi
 TWO_PI = 2.0 * math.pi
@@ -37,17 +38,6 @@ _SPLIT = 134217729.0  # 2**27 + 1, Veltkamp's splitter for doubles
 CREATE = 1
 LINK = 2
 SET = 3
-
-NODE_ADDED = 1
-LINK_ADDED = 2
-RELAXED = 4
-FIXED = 8
-FALLBACK = -1
-"""Returned when a value the Python path would refuse (not finite) is met before
-anything but the odometry changed: the caller runs the Python path for the action."""
-GROW = -2
-"""Returned, nothing changed, when the action needs a row that an array lacks: the
-caller makes room and calls again."""
 
 
 @njit_cached(nogil=True, inline="always")
@@ -206,8 +196,8 @@ def frame_step(
         loops, correction: ``exp_loops``, ``exp_correction``.
 
     Returns:
-        :data:`GROW`, :data:`FALLBACK`, or the bits :data:`NODE_ADDED`,
-        :data:`LINK_ADDED`, :data:`RELAXED`, :data:`FIXED`.
+        :mod:`ratslam_graph.frame_step`'s ``GROW`` or ``FALLBACK``, or its bits
+        ``NODE_ADDED``, ``LINK_ADDED``, ``RELAXED``, ``FIXED``.
     """
     if kind != 0 and (
         n >= min(pose.shape[0], out_ends.shape[0])

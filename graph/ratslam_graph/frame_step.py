@@ -19,9 +19,11 @@ costs the call and a few attribute reads.
 
 from __future__ import annotations
 
+import logging
 import math
 from typing import TYPE_CHECKING, Any
 
+from ratslam_graph import relaxation
 from ratslam_graph.messages import Action, ActionKind
 
 if TYPE_CHECKING:
@@ -33,6 +35,19 @@ __all__ = ["FrameArgs", "compiled_frame", "frame_args", "run", "run_frame", "ste
 _KERNEL: Any = None
 _NO_ODOMETRY = (0.0, 0.0, 0.0)
 _CREATE = int(ActionKind.CREATE)
+_log = relaxation.log  # its "did not converge" lines
+
+# The compiled frame's result: what changed (bits), or one of the negative codes.
+NODE_ADDED = 1
+LINK_ADDED = 2
+RELAXED = 4
+FIXED = 8
+FALLBACK = -1
+"""A value the Python path would refuse (not finite) was met before anything but the
+odometry changed: the caller runs the Python path for the action."""
+GROW = -2
+"""Nothing changed: the action needs a row that an array lacks; the caller makes room
+and calls again."""
 
 
 def _kernel() -> Any:
@@ -87,7 +102,7 @@ class FrameArgs:
             links in OpenRatSLAM's order).
         ref: that order (current).
         flags: the settings' bits of the kernel's ``flags``.
-        loops, correction: ``exp_loops``, ``exp_correction``.
+        tail: the kernel's last arguments, ``(exp_loops, exp_correction)``.
         ids: ``(id(params), id(backend))``, the tail of the map's fixed-point stamp.
     """
 
@@ -95,15 +110,14 @@ class FrameArgs:
         "arrays",
         "backend",
         "compiled",
-        "correction",
         "flags",
         "ids",
         "layout",
-        "loops",
         "own_step",
         "params",
         "ref",
         "relax_every",
+        "tail",
     )
 
     def __init__(self, em: ExperienceMap) -> None:
@@ -116,7 +130,7 @@ class FrameArgs:
         self.own_step = compiled and type(em).step_frame is ExperienceMap.step_frame
         self.relax_every = p.exp_relax == "every_frame"
         self.flags = p.exp_first_at_origin << 3 | (p.exp_link_time == "per_link") << 4
-        self.loops, self.correction = int(p.exp_loops), float(p.exp_correction)
+        self.tail = (int(p.exp_loops), float(p.exp_correction))
         self.ref = ref = s._reference()  # (may renew the layout: read after)
         self.arrays = (
             em._fs,
@@ -226,46 +240,40 @@ def run(
         pcv = checked
     elif kind and not 0 <= dest < n:
         return False
-    e = s.e
-    fixed = em._fixed_at == (s.version, *c.ids)
-    if not kind and (not relax or fixed or n < 2 or e == 0 or c.loops == 0):
+    e, fixed_at = s.e, em._fixed_at  # (version, id(params), id(backend)) of a fixed point
+    fixed = fixed_at is not None and fixed_at[0] == s.version and fixed_at[1:] == c.ids
+    if not kind and (not relax or fixed or n < 2 or e == 0 or c.tail[0] == 0):
         if odo is not None:  # odometry alone: the Python path costs less than a call
             em.on_odometry(*odo)
         return True
+    flags = c.flags | relax << 1 | fixed << 2
+    if odo is None:
+        odo = _NO_ODOMETRY
+    else:
+        flags |= 1
     k = _KERNEL or _kernel()
-    flags = c.flags | (odo is not None) | relax << 1 | fixed << 2
-    vals = (
-        *(_NO_ODOMETRY if odo is None else odo),
-        kind,
-        dest,
-        float(action.relative_rad),
-        behaviour,
-        n,
-        e,
-        flags,
-        c.loops,
-        c.correction,
-    )
-    out = k.frame_step(*c.arrays, *vals)
-    if out == k.GROW:  # nothing changed: room for the action, and again
-        s.reserve_frame()
-        c = frame_args(em)
-        out = k.frame_step(*c.arrays, *vals)
-        if out == k.GROW:  # (cannot happen: every array has the room now)
-            return False
-    if out == k.FALLBACK:  # the odometry is in; the Python path raises as it always has
-        em.apply(action, frame=frame, t=t, pc=pc, template_id=template_id, behaviour=behaviour)
-        if relax:
-            em.iterate()
-        return True
-    if out & k.NODE_ADDED:
+    rel = float(action.relative_rad)
+    out = k.frame_step(*c.arrays, *odo, kind, dest, rel, behaviour, n, e, flags, *c.tail)
+    if out < 0:
+        if out == GROW:  # nothing changed: room for the action, and again
+            s.reserve_frame()
+            c = frame_args(em)
+            out = k.frame_step(*c.arrays, *odo, kind, dest, rel, behaviour, n, e, flags, *c.tail)
+            if out == GROW:  # (cannot happen: every array has the room now)
+                return False
+        if out == FALLBACK:  # the odometry is in; the Python path raises as it always has
+            em.apply(action, frame=frame, t=t, pc=pc, template_id=template_id, behaviour=behaviour)
+            if relax:
+                em.iterate()
+            return True
+    if out & NODE_ADDED:
         s.node_added(pcv, template_id, frame, t)
-    if out & k.LINK_ADDED:
+    if out & LINK_ADDED:
         s.link_added(c.ref)
-    if out & k.RELAXED:
+    if out & RELAXED:
         s.poses_changed()
-        if out & k.FIXED:
+        if out & FIXED:
             em._fixed_at = (s.version, *c.ids)
-        else:
+        elif _log.isEnabledFor(logging.DEBUG):
             em._not_converged()
     return True
