@@ -29,7 +29,15 @@ import numpy as np
 
 from ratslam_graph._jit import njit_cached
 from ratslam_graph.backends._sweep import insert_link, sweep
-from ratslam_graph.frame_step import FALLBACK, FIXED, GROW, LINK_ADDED, NODE_ADDED, RELAXED
+from ratslam_graph.frame_step import (
+    FALLBACK,
+    FIXED,
+    GROW,
+    LINK_ADDED,
+    NODE_ADDED,
+    REFUSED,
+    RELAXED,
+)
 
 PI = math.pi
 TWO_PI = 2.0 * math.pi
@@ -196,9 +204,14 @@ def frame_step(
         loops, correction: ``exp_loops``, ``exp_correction``.
 
     Returns:
-        :mod:`ratslam_graph.frame_step`'s ``GROW`` or ``FALLBACK``, or its bits
+        :mod:`ratslam_graph.frame_step`'s ``REFUSED``, ``GROW`` or ``FALLBACK``, or its bits
         ``NODE_ADDED``, ``LINK_ADDED``, ``RELAXED``, ``FIXED``.
     """
+    if kind == CREATE:
+        if dest != -1 and dest != n:
+            return REFUSED
+    elif kind != 0 and not 0 <= dest < n:
+        return REFUSED
     if kind != 0 and (
         n >= min(pose.shape[0], out_ends.shape[0])
         or e >= min(src.shape[0], dst.shape[0], link.shape[0], meas.shape[0], counts.shape[0])

@@ -29,7 +29,7 @@ from ratslam_graph.messages import Action, ActionKind
 if TYPE_CHECKING:
     from ratslam_graph.experience_map import ExperienceMap
 
-__all__ = ["FrameArgs", "compiled_frame", "frame_args", "run", "run_frame", "step_frame"]
+__all__ = ["FrameArgs", "compiled_frame", "frame_args", "run", "run_frame", "stage_frame", "step_frame"]
 
 
 _KERNEL: Any = None
@@ -48,6 +48,8 @@ odometry changed: the caller runs the Python path for the action."""
 GROW = -2
 """Nothing changed: the action needs a row that an array lacks; the caller makes room
 and calls again."""
+REFUSED = -3
+"""Nothing changed: the action's target does not exist (the Python path raises)."""
 
 
 def _kernel() -> Any:
@@ -214,6 +216,41 @@ def _created_pc(pc: Any) -> tuple[float, float, float] | None:
     return pcv if all(map(math.isfinite, pcv)) else None
 
 
+def stage_frame(
+    em: ExperienceMap,
+    odo: tuple[float, float, float] | None,
+    action: Action,
+    frame: int,
+    t: float,
+    pc: Any,
+    template_id: int,
+    behaviour: int | None,
+) -> int | None:
+    """The pipeline's frame (relaxed when it has an action or ``exp_relax`` is
+    ``"every_frame"``) as :meth:`ExperienceMap.step_frame` would take it, when the map's
+    class keeps that method: the odometry alone (one compiled call) or :func:`run`.
+    Returns the current experience, or None, nothing done, when the Python path must
+    take the frame (:func:`run`'s refusals, settings the compiled frame does not
+    reproduce, a class with its own ``step_frame``)."""
+    c = em._frame_args
+    if (
+        c is None
+        or c.layout != em.store.layout
+        or c.params is not em.params
+        or c.backend is not em._backend
+    ):
+        c = frame_args(em)
+    if not c.own_step:
+        return None
+    if action.kind or c.relax_every:
+        beh = 0 if behaviour is None else int(behaviour)
+        if not run(em, c, odo, action, frame, t, pc, template_id, beh, True):
+            return None
+    elif odo is not None:  # no action, no relaxation: the odometry alone
+        (_KERNEL or _kernel()).odometry(em._fs, *odo)
+    return em._ist.item(0)  # current_id
+
+
 def run(
     em: ExperienceMap,
     c: FrameArgs,
@@ -226,46 +263,44 @@ def run(
     behaviour: int,
     relax: bool,
 ) -> bool:
-    """:func:`step_frame` with ``em``'s current :class:`FrameArgs` (positional, for the
-    pipeline's stage): False, nothing done, when the Python path must take the frame
-    (the action's target does not exist, a created experience's coordinates are not
-    three finite values)."""
-    s = em.store
-    n, kind, dest = s.n, int(action.kind), int(action.dest_id)
+    """:func:`step_frame` with ``em``'s current :class:`FrameArgs` (positional): False,
+    nothing done, when the Python path must take the frame (the action's target does not
+    exist, a created experience's coordinates are not three finite values)."""
+    kind = int(action.kind)
     pcv: tuple[float, ...] = ()
     if kind == _CREATE:
         checked = _created_pc(pc)
-        if checked is None or (dest != -1 and dest != n):
+        if checked is None:
             return False
         pcv = checked
-    elif kind and not 0 <= dest < n:
-        return False
-    e, fixed_at = s.e, em._fixed_at  # (version, id(params), id(backend)) of a fixed point
+    s = em.store
+    fixed_at = em._fixed_at  # (version, id(params), id(backend)) of a fixed point
     fixed = fixed_at is not None and fixed_at[0] == s.version and fixed_at[1:] == c.ids
-    if not kind and (not relax or fixed or n < 2 or e == 0 or c.tail[0] == 0):
-        if odo is not None:  # odometry alone: the Python path costs less than a call
-            em.on_odometry(*odo)
-        return True
     flags = c.flags | relax << 1 | fixed << 2
     if odo is None:
         odo = _NO_ODOMETRY
     else:
         flags |= 1
+    vals = (*odo, kind, int(action.dest_id), float(action.relative_rad), behaviour, s.n, s.e)
     k = _KERNEL or _kernel()
-    rel = float(action.relative_rad)
-    out = k.frame_step(*c.arrays, *odo, kind, dest, rel, behaviour, n, e, flags, *c.tail)
+    out = k.frame_step(*c.arrays, *vals, flags, *c.tail)
+    if out == RELAXED:  # the common outcome: poses moved, no fixed point
+        s.poses_changed()
+        if _log.isEnabledFor(logging.DEBUG):
+            em._not_converged()
+        return True
+    if out == GROW:  # nothing changed: room for the action, and again
+        s.reserve_frame()
+        c = frame_args(em)
+        out = k.frame_step(*c.arrays, *vals, flags, *c.tail)
     if out < 0:
-        if out == GROW:  # nothing changed: room for the action, and again
-            s.reserve_frame()
-            c = frame_args(em)
-            out = k.frame_step(*c.arrays, *odo, kind, dest, rel, behaviour, n, e, flags, *c.tail)
-            if out == GROW:  # (cannot happen: every array has the room now)
-                return False
-        if out == FALLBACK:  # the odometry is in; the Python path raises as it always has
-            em.apply(action, frame=frame, t=t, pc=pc, template_id=template_id, behaviour=behaviour)
-            if relax:
-                em.iterate()
-            return True
+        if out != FALLBACK:  # REFUSED (or, which cannot be, GROW again): nothing changed
+            return False
+        # the odometry is in; the Python path raises as it always has
+        em.apply(action, frame=frame, t=t, pc=pc, template_id=template_id, behaviour=behaviour)
+        if relax:
+            em.iterate()
+        return True
     if out & NODE_ADDED:
         s.node_added(pcv, template_id, frame, t)
     if out & LINK_ADDED:

@@ -34,34 +34,16 @@ def compiled_step(
     template_id: int,
     behaviour: int | None,
 ) -> int | None:
-    """The frame as the map's own compiled frame, when the map has one that the pipeline
-    may take without its ``step_frame`` (an
-    :class:`~ratslam_graph.experience_map.ExperienceMap` whose class keeps the compiled
-    frame's methods and whose settings it reproduces) and the action is one it takes;
-    returns the current experience, or None, nothing done: the caller takes the frame
-    the general way (:func:`experience_map_step`). Arguments as
-    :func:`experience_map_step`'s (``t`` and ``template_id`` as given, converted when
-    an experience is made)."""
+    """The frame as the map's own compiled frame
+    (:func:`ratslam_graph.frame_step.stage_frame`), when the map is an
+    :class:`~ratslam_graph.experience_map.ExperienceMap` that has one the pipeline may
+    take without its ``step_frame`` and the action is one it takes; returns the current
+    experience, or None, nothing done: the caller takes the frame the general way
+    (:func:`general_step`). Arguments as :func:`experience_map_step`'s (``t`` and
+    ``template_id`` as given, converted when an experience is made)."""
     if not isinstance(em, ExperienceMap):
         return None
-    c = em._frame_args
-    if (
-        c is None
-        or c.layout != em.store.layout
-        or c.params is not em.params
-        or c.backend is not em._backend
-    ):
-        c = frame_step.frame_args(em)
-    if not c.own_step:
-        return None
-    if not action.kind and not c.relax_every:  # no action, no relaxation: odometry alone
-        if odo is not None:
-            (frame_step._KERNEL or frame_step._kernel()).odometry(em._fs, *odo)
-        return em._ist.item(0)  # current_id
-    beh = 0 if behaviour is None else int(behaviour)
-    if frame_step.run(em, c, odo, action, frame, t, pc, template_id, beh, True):
-        return em._ist.item(0)
-    return None
+    return frame_step.stage_frame(em, odo, action, frame, t, pc, template_id, behaviour)
 
 
 def _plan(em: ExperienceMapModule) -> tuple[Any, bool, bool]:

@@ -18,12 +18,14 @@ import numpy as np
 import torch
 
 import torchratslam.pipeline.defaults  # noqa: F401  (registers the default stages)
+from ratslam_graph.experience_map import ExperienceMap
+from ratslam_graph.frame_step import stage_frame
 from ratslam_graph.messages import Action, ActionKind
 from torchratslam.config import RatSLAMConfig
 from torchratslam.errors import InputError
 from torchratslam.messages import Frame, SessionState, ViewMatch
 from torchratslam.pipeline.checks import as_config, check_device, check_odometry_step
-from torchratslam.pipeline.em_stage import compiled_step, general_step
+from torchratslam.pipeline.em_stage import general_step
 from torchratslam.pipeline.history import History
 from torchratslam.pipeline.results import RunResult, StepResult
 from torchratslam.pipeline.runner import RunProgress, open_frames, parked_gc
@@ -245,9 +247,10 @@ class RatSLAM:
             # experience_map_step, what it needs worked out only where it is needed
             em = self.experience_map
             moved = odo if index or not self._skips_odometry(index) else None
-            current = compiled_step(em, moved, action, index, frame.t, pc, view.template_id, behaviour)
-            if current is not None:
-                return current
+            if isinstance(em, ExperienceMap):  # em_stage.compiled_step, without a layer
+                current = stage_frame(em, moved, action, index, frame.t, pc, view.template_id, behaviour)
+                if current is not None:
+                    return current
             return general_step(
                 em,
                 moved,
