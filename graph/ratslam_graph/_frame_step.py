@@ -185,8 +185,9 @@ def frame_step(
     flags: int,
     loops: int,
     correction: float,
-) -> int:  # pragma: no cover - compiled
-    """One frame of the experience map, in place; the result's bits say what changed.
+) -> tuple[int, int]:  # pragma: no cover - compiled
+    """One frame of the experience map, in place; the result's bits say what changed,
+    and the current experience after it.
 
     Args:
         fs: ``[accum_x, accum_y, accum_facing, accum_time, relative_rad]``.
@@ -205,20 +206,20 @@ def frame_step(
 
     Returns:
         :mod:`ratslam_graph.frame_step`'s ``REFUSED``, ``GROW`` or ``FALLBACK``, or its bits
-        ``NODE_ADDED``, ``LINK_ADDED``, ``RELAXED``, ``FIXED``.
+        ``NODE_ADDED``, ``LINK_ADDED``, ``RELAXED``, ``FIXED``; and ``ist[0]``.
     """
     if kind == CREATE:
         if dest != -1 and dest != n:
-            return REFUSED
+            return REFUSED, ist[0]
     elif kind != 0 and not 0 <= dest < n:
-        return REFUSED
+        return REFUSED, ist[0]
     if kind != 0 and (
         n >= min(pose.shape[0], out_ends.shape[0])
         or e >= min(src.shape[0], dst.shape[0], link.shape[0], meas.shape[0], counts.shape[0])
         or e >= min(behaviour.shape[0], edge_dirty.shape[0], out_next.shape[0])
         or e >= min(order.shape[0], rsrc.shape[0], rdst.shape[0], rlink.shape[0])
     ):
-        return GROW
+        return GROW, ist[0]
     ref_n = e  # the order is current: one row a link
     if flags & 1:
         odometry(fs, vtrans, vrot, dt)
@@ -236,7 +237,7 @@ def frame_step(
             y = pose[cur, 1] + fs[1]
         th = wrap_pi(wrap_pi(fs[2]))
         if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(th)):
-            return FALLBACK
+            return FALLBACK, ist[0]
         if cur >= 0:
             src_id = cur
             new_dst = n
@@ -256,7 +257,7 @@ def frame_step(
         if not (
             math.isfinite(d) and math.isfinite(h) and math.isfinite(f) and math.isfinite(fs[3])
         ):
-            return FALLBACK
+            return FALLBACK, ist[0]
     target = dest
     if kind == CREATE:
         pose[n, 0] = x
@@ -309,11 +310,11 @@ def frame_step(
     nn = n + (out & NODE_ADDED)
     ne = e + (out & LINK_ADDED) // LINK_ADDED
     if not flags & 2 or nn < 2 or ne == 0 or loops == 0:
-        return out
+        return out, ist[0]
     if flags & 4 and out == 0:
-        return out
+        return out, ist[0]
     ran = sweep(pose, rsrc[:ref_n], rdst[:ref_n], rlink[:ref_n], loops, correction)
     out |= RELAXED
     if ran < loops:
         out |= FIXED
-    return out
+    return out, ist[0]

@@ -29,13 +29,14 @@ from ratslam_graph.messages import Action, ActionKind
 if TYPE_CHECKING:
     from ratslam_graph.experience_map import ExperienceMap
 
-__all__ = ["FrameArgs", "compiled_frame", "frame_args", "run", "run_frame", "stage_frame", "step_frame"]
+__all__ = ["FrameArgs", "compiled_frame", "frame_args", "run_frame", "stage_frame", "step_frame"]
 
 
 _KERNEL: Any = None
 _NO_ODOMETRY = (0.0, 0.0, 0.0)
 _CREATE = int(ActionKind.CREATE)
 _log = relaxation.log  # its "did not converge" lines
+_DEBUG = logging.DEBUG
 
 # The compiled frame's result: what changed (bits), or one of the negative codes.
 NODE_ADDED = 1
@@ -102,7 +103,7 @@ class FrameArgs:
         relax_every: ``exp_relax == "every_frame"``.
         arrays: the kernel's array arguments (accumulators, ids, the store's arrays, the
             links in OpenRatSLAM's order).
-        ref: that order (current).
+        ref: that order (current; None, and no arrays, when not ``compiled``).
         flags: the settings' bits of the kernel's ``flags``.
         tail: the kernel's last arguments, ``(exp_loops, exp_correction)``.
         ids: ``(id(params), id(backend))``, the tail of the map's fixed-point stamp.
@@ -133,7 +134,14 @@ class FrameArgs:
         self.relax_every = p.exp_relax == "every_frame"
         self.flags = p.exp_first_at_origin << 3 | (p.exp_link_time == "per_link") << 4
         self.tail = (int(p.exp_loops), float(p.exp_correction))
-        self.ref = ref = s._reference()  # (may renew the layout: read after)
+        self.ref, self.arrays = None, ()
+        if compiled:
+            self._arrays(em)
+        self.layout = s.layout  # (after the order: making it renews the layout)
+
+    def _arrays(self, em: ExperienceMap) -> None:
+        s = em.store
+        self.ref = ref = s._reference()
         self.arrays = (
             em._fs,
             em._ist,
@@ -149,7 +157,6 @@ class FrameArgs:
             s.out_next,
             *ref.buffers,
         )
-        self.layout = s.layout
 
 
 def frame_args(em: ExperienceMap) -> FrameArgs:
@@ -180,8 +187,7 @@ def run_frame(
     """:meth:`ExperienceMap.step_frame`: the compiled call when :func:`compiled_frame`
     allows it and the action is one it takes, else ``on_odometry``, ``apply`` and
     ``iterate``."""
-    c = frame_args(em)
-    if c.compiled and run(em, c, odo, action, frame, t, pc, template_id, behaviour, relax):
+    if stage_frame(em, odo, action, frame, t, pc, template_id, behaviour, relax) is not None:
         return
     if odo is not None:
         em.on_odometry(*odo)
@@ -203,8 +209,8 @@ def step_frame(
     relax: bool,
 ) -> bool:
     """One frame in one compiled call; False (nothing done) when the Python path must
-    take it (see the module's text; the caller has checked :func:`compiled_frame`)."""
-    return run(em, frame_args(em), odo, action, frame, t, pc, template_id, behaviour, relax)
+    take it (see the module's text)."""
+    return stage_frame(em, odo, action, frame, t, pc, template_id, behaviour, relax) is not None
 
 
 def _created_pc(pc: Any) -> tuple[float, float, float] | None:
@@ -225,13 +231,25 @@ def stage_frame(
     pc: Any,
     template_id: int,
     behaviour: int | None,
+    relax: bool | None = None,
 ) -> int | None:
-    """The pipeline's frame (relaxed when it has an action or ``exp_relax`` is
-    ``"every_frame"``) as :meth:`ExperienceMap.step_frame` would take it, when the map's
-    class keeps that method: the odometry alone (one compiled call) or :func:`run`.
-    Returns the current experience, or None, nothing done, when the Python path must
-    take the frame (:func:`run`'s refusals, settings the compiled frame does not
-    reproduce, a class with its own ``step_frame``)."""
+    """One frame of ``em`` as its compiled frame, positional (the pipeline's stage calls
+    this, :func:`step_frame` and :func:`run_frame` too).
+
+    Args:
+        em, odo, action, frame, t, pc, template_id, behaviour: as
+            :meth:`ExperienceMap.step_frame`'s (``behaviour`` None: 0).
+        relax: relax after the action; None: the pipeline's frame, relaxed when it has
+            an action or ``exp_relax`` is ``"every_frame"``, taken here only when the
+            map's class keeps :meth:`ExperienceMap.step_frame` (a frame without either
+            is its odometry alone, one compiled call).
+
+    Returns:
+        The current experience after the frame, or None, nothing done, when the Python
+        path must take it: settings the compiled frame does not reproduce, an action
+        whose target does not exist, a created experience's coordinates that are not
+        three finite values.
+    """
     c = em._frame_args
     if (
         c is None
@@ -240,67 +258,57 @@ def stage_frame(
         or c.backend is not em._backend
     ):
         c = frame_args(em)
-    if not c.own_step:
-        return None
-    if action.kind or c.relax_every:
-        beh = 0 if behaviour is None else int(behaviour)
-        if not run(em, c, odo, action, frame, t, pc, template_id, beh, True):
+    if relax is None:
+        if not c.own_step:
             return None
-    elif odo is not None:  # no action, no relaxation: the odometry alone
-        (_KERNEL or _kernel()).odometry(em._fs, *odo)
-    return em._ist.item(0)  # current_id
-
-
-def run(
-    em: ExperienceMap,
-    c: FrameArgs,
-    odo: tuple[float, float, float] | None,
-    action: Action,
-    frame: int,
-    t: float,
-    pc: Any,
-    template_id: int,
-    behaviour: int,
-    relax: bool,
-) -> bool:
-    """:func:`step_frame` with ``em``'s current :class:`FrameArgs` (positional): False,
-    nothing done, when the Python path must take the frame (the action's target does not
-    exist, a created experience's coordinates are not three finite values)."""
+        if not action.kind and not c.relax_every:  # the odometry alone
+            if odo is not None:
+                (_KERNEL or _kernel()).odometry(em._fs, *odo)
+            return em._ist.item(0)  # current_id
+        relax = True
+    elif not c.compiled:
+        return None
     kind = int(action.kind)
     pcv: tuple[float, ...] = ()
     if kind == _CREATE:
         checked = _created_pc(pc)
         if checked is None:
-            return False
+            return None
         pcv = checked
     s = em.store
     fixed_at = em._fixed_at  # (version, id(params), id(backend)) of a fixed point
     fixed = fixed_at is not None and fixed_at[0] == s.version and fixed_at[1:] == c.ids
-    flags = c.flags | relax << 1 | fixed << 2
-    if odo is None:
-        odo = _NO_ODOMETRY
-    else:
-        flags |= 1
-    vals = (*odo, kind, int(action.dest_id), float(action.relative_rad), behaviour, s.n, s.e)
+    flags = c.flags | relax << 1 | fixed << 2 | (odo is not None)
+    beh = 0 if behaviour is None else int(behaviour)
     k = _KERNEL or _kernel()
-    out = k.frame_step(*c.arrays, *vals, flags, *c.tail)
+    out, current = k.frame_step(
+        *c.arrays,
+        *(_NO_ODOMETRY if odo is None else odo),
+        kind,
+        int(action.dest_id),
+        float(action.relative_rad),
+        beh,
+        s.n,
+        s.e,
+        flags,
+        *c.tail,
+    )
     if out == RELAXED:  # the common outcome: poses moved, no fixed point
         s.poses_changed()
-        if _log.isEnabledFor(logging.DEBUG):
+        if _log.isEnabledFor(_DEBUG):
             em._not_converged()
-        return True
-    if out == GROW:  # nothing changed: room for the action, and again
-        s.reserve_frame()
-        c = frame_args(em)
-        out = k.frame_step(*c.arrays, *vals, flags, *c.tail)
+        return current
     if out < 0:
-        if out != FALLBACK:  # REFUSED (or, which cannot be, GROW again): nothing changed
-            return False
-        # the odometry is in; the Python path raises as it always has
-        em.apply(action, frame=frame, t=t, pc=pc, template_id=template_id, behaviour=behaviour)
+        if out == GROW:  # nothing changed: room for the action, and the frame again
+            s.reserve_frame()
+            return stage_frame(em, odo, action, frame, t, pc, template_id, beh, relax)
+        if out == REFUSED:  # nothing changed
+            return None
+        # FALLBACK: the odometry is in; the Python path raises as it always has
+        em.apply(action, frame=frame, t=t, pc=pc, template_id=template_id, behaviour=beh)
         if relax:
             em.iterate()
-        return True
+        return em._ist.item(0)
     if out & NODE_ADDED:
         s.node_added(pcv, template_id, frame, t)
     if out & LINK_ADDED:
@@ -309,6 +317,6 @@ def run(
         s.poses_changed()
         if out & FIXED:
             em._fixed_at = (s.version, *c.ids)
-        elif _log.isEnabledFor(logging.DEBUG):
+        elif _log.isEnabledFor(_DEBUG):
             em._not_converged()
-    return True
+    return current
