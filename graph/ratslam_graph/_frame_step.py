@@ -156,6 +156,16 @@ def odometry(fs: np.ndarray, vtrans: float, vrot: float, dt: float) -> None:  # 
 
 
 @njit_cached(nogil=True)
+def odometry_frame(
+    fs: np.ndarray, ist: np.ndarray, vtrans: float, vrot: float, dt: float
+) -> int:  # pragma: no cover - compiled
+    """A frame without action or relaxation: :func:`odometry`; returns the current
+    experience (``ist`` as :func:`frame_step`'s)."""
+    odometry(fs, vtrans, vrot, dt)
+    return ist[0]
+
+
+@njit_cached(nogil=True)
 def frame_step(
     fs: np.ndarray,
     ist: np.ndarray,

@@ -262,9 +262,9 @@ def stage_frame(
         if not c.own_step:
             return None
         if not action.kind and not c.relax_every:  # the odometry alone
-            if odo is not None:
-                (_KERNEL or _kernel()).odometry(em._fs, *odo)
-            return em._ist.item(0)  # current_id
+            if odo is None:
+                return em._ist.item(0)  # current_id
+            return (_KERNEL or _kernel()).odometry_frame(em._fs, em._ist, *odo)
         relax = True
     elif not c.compiled:
         return None
