@@ -29,7 +29,7 @@ from ratslam_graph.messages import Action, ActionKind
 if TYPE_CHECKING:
     from ratslam_graph.experience_map import ExperienceMap
 
-__all__ = ["FrameArgs", "compiled_frame", "frame_args", "run_frame", "stage_frame", "step_frame"]
+__all__ = ["FrameArgs", "compiled_frame", "frame_args", "odometry_frame", "run_frame", "stage_frame", "step_frame"]
 
 
 _KERNEL: Any = None
@@ -220,6 +220,25 @@ def _created_pc(pc: Any) -> tuple[float, float, float] | None:
         return None
     pcv = (float(pc[0]), float(pc[1]), float(pc[2]))
     return pcv if all(map(math.isfinite, pcv)) else None
+
+
+def odometry_frame(
+    em: ExperienceMap, odo: tuple[float, float, float], action: Action
+) -> int | None:
+    """:func:`stage_frame` of a pipeline frame without action (``action`` NONE, ``odo``
+    given, ``relax`` None), with less to pass and check: the odometry alone, one
+    compiled call that returns the current experience, unless ``exp_relax`` is
+    ``"every_frame"`` (then :func:`stage_frame`; a frame without action makes no
+    experience, so its index, time, coordinates, template and behaviour are not
+    needed). None, nothing done, as :func:`stage_frame`."""
+    c = em._frame_args
+    if c is None or c.params is not em.params or c.backend is not em._backend:
+        c = frame_args(em)  # (the arrays are not needed: the layout is not checked)
+    if not c.own_step:
+        return None
+    if c.relax_every:
+        return stage_frame(em, odo, action, -1, 0.0, (), -1, None)
+    return (_KERNEL or _kernel()).odometry_frame(em._fs, em._ist, *odo)
 
 
 def stage_frame(

@@ -43,7 +43,9 @@ def compiled_step(
     ``template_id`` as given, converted when an experience is made)."""
     if not isinstance(em, ExperienceMap):
         return None
-    return frame_step.stage_frame(em, odo, action, frame, t, pc, template_id, behaviour)
+    if action.kind or odo is None:
+        return frame_step.stage_frame(em, odo, action, frame, t, pc, template_id, behaviour)
+    return frame_step.odometry_frame(em, odo, action)
 
 
 def _plan(em: ExperienceMapModule) -> tuple[Any, bool, bool]:

@@ -19,7 +19,7 @@ import torch
 
 import torchratslam.pipeline.defaults  # noqa: F401  (registers the default stages)
 from ratslam_graph.experience_map import ExperienceMap
-from ratslam_graph.frame_step import stage_frame
+from ratslam_graph.frame_step import odometry_frame, stage_frame
 from ratslam_graph.messages import Action, ActionKind
 from torchratslam.config import RatSLAMConfig
 from torchratslam.errors import InputError
@@ -244,16 +244,20 @@ class RatSLAM:
         behaviour: int | None = None,
     ) -> int:
         with self.timings.section("experience_map"):
-            # experience_map_step, what it needs worked out only where it is needed
+            # experience_map_step: its compiled_step without a layer, the rest worked out
+            # only where it is needed
             em = self.experience_map
-            moved = odo if index or not self._skips_odometry(index) else None
-            if isinstance(em, ExperienceMap):  # em_stage.compiled_step, without a layer
-                current = stage_frame(em, moved, action, index, frame.t, pc, view.template_id, behaviour)
+            if index and isinstance(em, ExperienceMap):
+                current = (
+                    stage_frame(em, odo, action, index, frame.t, pc, view.template_id, behaviour)
+                    if action.kind
+                    else odometry_frame(em, odo, action)
+                )
                 if current is not None:
                     return current
             return general_step(
                 em,
-                moved,
+                odo if index or not self._skips_odometry(index) else None,
                 action,
                 frame=index,
                 t=float(frame.t),
