@@ -260,15 +260,14 @@ class ExperienceGraph:
                 setattr(self, name, _grow(getattr(self, name), need))
             self.layout = next(_LAYOUTS)
 
-    def reserve_frame(self) -> relaxation.ReferenceOrder:
-        """Room for one more experience and link, in the arrays and in the links in
-        OpenRatSLAM's order (current, returned): what the compiled frame writes."""
+    def reserve_frame(self) -> None:
+        """Make room for one more experience and link in the arrays and in the links in
+        OpenRatSLAM's order (made current): what the compiled frame writes."""
         self.reserve(1, 1)
         ref = self._reference()
         if ref.n == len(ref.buffers[0]):
             ref.reserve()
             self.layout = next(_LAYOUTS)
-        return ref
 
     def set_link(self, k: int, d: float, heading: float, facing: float, dt: float) -> None:
         """Write link ``k``'s ``(d, heading, facing, dt)`` and its measurement."""

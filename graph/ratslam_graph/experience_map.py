@@ -130,7 +130,7 @@ class ExperienceMap:
         self._backend = backend
         self.store = ExperienceGraph()
         self._compiled_for: tuple[tuple[int, int], bool] | None = None
-        self._frame_args: frame_step.FrameArgs | None = None  # the compiled frame's
+        self._frame_args: frame_step.FrameArgs | None = None  # (frame_step.frame_args)
         self._clear()
 
     def __getstate__(self) -> dict[str, Any]:

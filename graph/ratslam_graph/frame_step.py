@@ -14,7 +14,11 @@ action the Python path would refuse, goes the Python way.
 What the compiled call is given of a map (its arrays, the links in OpenRatSLAM's order,
 the settings' flags) is kept on the map (:class:`FrameArgs`, :func:`frame_args`) while
 its store's ``layout``, its ``params`` and its backend are the same objects, so a frame
-costs the call and a few attribute reads.
+costs the call and a few attribute reads: :func:`stage_frame` (which :func:`step_frame`
+and :func:`run_frame` call, and the pipeline's stage directly) and, for the pipeline's
+frames without action, :func:`odometry_frame`. The kernel itself refuses an action whose
+target does not exist and asks for room when an array is full, before it changes
+anything.
 """
 
 from __future__ import annotations
@@ -23,13 +27,23 @@ import logging
 import math
 from typing import TYPE_CHECKING, Any
 
+import numpy as np
+
 from ratslam_graph import relaxation
 from ratslam_graph.messages import Action, ActionKind
 
 if TYPE_CHECKING:
     from ratslam_graph.experience_map import ExperienceMap
 
-__all__ = ["FrameArgs", "compiled_frame", "frame_args", "odometry_frame", "run_frame", "stage_frame", "step_frame"]
+__all__ = [
+    "FrameArgs",
+    "compiled_frame",
+    "frame_args",
+    "odometry_frame",
+    "run_frame",
+    "stage_frame",
+    "step_frame",
+]
 
 
 _KERNEL: Any = None
@@ -134,7 +148,8 @@ class FrameArgs:
         self.relax_every = p.exp_relax == "every_frame"
         self.flags = p.exp_first_at_origin << 3 | (p.exp_link_time == "per_link") << 4
         self.tail = (int(p.exp_loops), float(p.exp_correction))
-        self.ref, self.arrays = None, ()
+        self.ref: relaxation.ReferenceOrder | None = None
+        self.arrays: tuple[np.ndarray, ...] = ()
         if compiled:
             self._arrays(em)
         self.layout = s.layout  # (after the order: making it renews the layout)
@@ -252,8 +267,8 @@ def stage_frame(
     behaviour: int | None,
     relax: bool | None = None,
 ) -> int | None:
-    """One frame of ``em`` as its compiled frame, positional (the pipeline's stage calls
-    this, :func:`step_frame` and :func:`run_frame` too).
+    """One frame of ``em`` as its compiled frame (arguments by position: the pipeline's
+    stage calls it directly).
 
     Args:
         em, odo, action, frame, t, pc, template_id, behaviour: as
@@ -331,6 +346,7 @@ def stage_frame(
     if out & NODE_ADDED:
         s.node_added(pcv, template_id, frame, t)
     if out & LINK_ADDED:
+        assert c.ref is not None  # (a compiled frame's arguments have it)
         s.link_added(c.ref)
     if out & RELAXED:
         s.poses_changed()

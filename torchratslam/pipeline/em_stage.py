@@ -2,14 +2,16 @@
 
 :func:`experience_map_step` is what :class:`~torchratslam.pipeline.RatSLAM` does with the
 experience map each frame: one compiled call (:func:`compiled_step`) where the map has it
-and the pose cells' action stands, else odometry, the action (the experience map's own
-under ``exp_create_rule="activity"``, Eqs. 1-4) and the relaxation, one by one.
-:func:`compiled_step` is an :class:`~ratslam_graph.experience_map.ExperienceMap`'s own
-frame, what its ``step_frame`` would do, without the layers between: a frame without
-action or relaxation (about half of OpenRatSLAM's frames) as its odometry alone (one
-compiled call, ``ratslam_graph._frame_step.odometry``), a frame with an action as the
-compiled frame (:func:`ratslam_graph.frame_step.run`, with the arguments the map keeps
-for it).
+and the pose cells' action stands, else (:func:`general_step`) odometry, the action (the
+experience map's own under ``exp_create_rule="activity"``, Eqs. 1-4) and the relaxation,
+one by one. :func:`compiled_step` is an
+:class:`~ratslam_graph.experience_map.ExperienceMap`'s own frame, what its ``step_frame``
+would do, without the layers between: a frame without action or relaxation (about half
+of OpenRatSLAM's frames) as its odometry alone
+(:func:`ratslam_graph.frame_step.odometry_frame`, one compiled call), a frame with an
+action as the compiled frame (:func:`ratslam_graph.frame_step.stage_frame`, with the
+arguments the map keeps for it). The pipeline's stage does what
+:func:`experience_map_step` does, with :func:`compiled_step`'s two calls inline.
 """
 
 from __future__ import annotations
