@@ -102,11 +102,9 @@ class ExperienceGraph:
         out_ends, out_next: each experience's out-links (:func:`out_lists`).
         edge_dirty: 1 where a link's graph attributes are stale.
         version: bumped by every change of poses or links.
-        layout: a stamp, unique in the process, renewed whenever an array is replaced
-            (grown, cleared, loaded) or the cached links in OpenRatSLAM's order stop
-            being current as they are (a link made or changed other than by the compiled
-            frame): what is kept of the arrays (the compiled frame's arguments) is valid
-            while it is the same.
+        layout: a stamp unique in the process, renewed when an array is replaced (grown,
+            cleared, loaded) or a link is made or changed other than by the compiled
+            frame: what is kept of the arrays (the compiled frame's) is valid while it is.
     """
 
     LINK_FIELDS = ("src", "dst", "link", "meas", "counts", "behaviour", "edge_dirty", "out_next")
@@ -246,23 +244,19 @@ class ExperienceGraph:
 
     def reserve(self, nodes: int, links: int) -> None:
         """Make room for ``nodes`` more experiences and ``links`` more links."""
-        need = self.n + nodes
-        if need > len(self.pose):
-            for name in ("pose", "pc", "vt", "frame", "t"):
-                setattr(self, name, _grow(getattr(self, name), need))
-            self.layout = next(_LAYOUTS)
-        if need > len(self.out_ends):
-            self.out_ends = _grow(self.out_ends, need, fill=-1)
-            self.layout = next(_LAYOUTS)
-        need = self.e + links
-        if need > len(self.src):
-            for name in self.LINK_FIELDS:
-                setattr(self, name, _grow(getattr(self, name), need))
-            self.layout = next(_LAYOUTS)
+        n, e = self.n + nodes, self.e + links
+        for names, need, fill in (
+            (("pose", "pc", "vt", "frame", "t"), n, 0),
+            (("out_ends",), n, -1),
+            (self.LINK_FIELDS, e, 0),
+        ):
+            if need > len(getattr(self, names[0])):
+                for name in names:
+                    setattr(self, name, _grow(getattr(self, name), need, fill))
+                self.layout = next(_LAYOUTS)
 
     def reserve_frame(self) -> None:
-        """Make room for one more experience and link in the arrays and in the links in
-        OpenRatSLAM's order (made current): what the compiled frame writes."""
+        """Room for one more experience and link, in the links' OpenRatSLAM order too."""
         self.reserve(1, 1)
         ref = self._reference()
         if ref.n == len(ref.buffers[0]):
