@@ -29,6 +29,15 @@ import numpy as np
 
 from ratslam_graph._jit import njit_cached
 from ratslam_graph.backends._sweep import insert_link, sweep
+from ratslam_graph.frame_step import (
+    FALLBACK,
+    FIXED,
+    GROW,
+    LINK_ADDED,
+    NODE_ADDED,
+    REFUSED,
+    RELAXED,
+)
 
 PI = math.pi
 TWO_PI = 2.0 * math.pi
@@ -37,14 +46,6 @@ _SPLIT = 134217729.0  # 2**27 + 1, Veltkamp's splitter for doubles
 CREATE = 1
 LINK = 2
 SET = 3
-
-NODE_ADDED = 1
-LINK_ADDED = 2
-RELAXED = 4
-FIXED = 8
-FALLBACK = -1
-"""Returned when a value the Python path would refuse (not finite) is met before
-anything but the odometry changed: the caller runs the Python path for the action."""
 
 
 @njit_cached(nogil=True, inline="always")
@@ -155,6 +156,16 @@ def odometry(fs: np.ndarray, vtrans: float, vrot: float, dt: float) -> None:  # 
 
 
 @njit_cached(nogil=True)
+def odometry_frame(
+    fs: np.ndarray, ist: np.ndarray, vtrans: float, vrot: float, dt: float
+) -> int:  # pragma: no cover - compiled
+    """A frame without action or relaxation: :func:`odometry`; returns the current
+    experience (``ist`` as :func:`frame_step`'s)."""
+    odometry(fs, vtrans, vrot, dt)
+    return ist[0]
+
+
+@njit_cached(nogil=True)
 def frame_step(
     fs: np.ndarray,
     ist: np.ndarray,
@@ -181,19 +192,21 @@ def frame_step(
     beh: int,
     n: int,
     e: int,
-    ref_n: int,
     flags: int,
     loops: int,
     correction: float,
-) -> int:  # pragma: no cover - compiled
-    """One frame of the experience map, in place; the result's bits say what changed.
+) -> tuple[int, int]:  # pragma: no cover - compiled
+    """One frame of the experience map, in place; the result's bits say what changed,
+    and the current experience after it.
 
     Args:
         fs: ``[accum_x, accum_y, accum_facing, accum_time, relative_rad]``.
         ist: ``[current_id, prev_id]``.
-        pose .. out_next: the map's arrays, with room for one more experience and link.
+        pose .. out_next: the map's arrays (an action needs room for one more
+            experience and link).
         order, rsrc, rdst, rlink: the links in OpenRatSLAM's order (creation rows,
-            sources, targets, values), current, ``ref_n`` rows in use, room for one more.
+            sources, targets, values), current (``e`` rows in use; an action needs room
+            for one more).
         vtrans, vrot, dt: the odometry; flags bit 1: apply it.
         kind, dest, rel, beh: the action, its target, relative angle and behaviour.
         n, e: experiences and links in use.
@@ -202,9 +215,22 @@ def frame_step(
         loops, correction: ``exp_loops``, ``exp_correction``.
 
     Returns:
-        :data:`FALLBACK`, or the bits :data:`NODE_ADDED`, :data:`LINK_ADDED`,
-        :data:`RELAXED`, :data:`FIXED`.
+        :mod:`ratslam_graph.frame_step`'s ``REFUSED``, ``GROW`` or ``FALLBACK``, or its bits
+        ``NODE_ADDED``, ``LINK_ADDED``, ``RELAXED``, ``FIXED``; and ``ist[0]``.
     """
+    if kind == CREATE:
+        if dest != -1 and dest != n:
+            return REFUSED, ist[0]
+    elif kind != 0 and not 0 <= dest < n:
+        return REFUSED, ist[0]
+    if kind != 0 and (
+        n >= min(pose.shape[0], out_ends.shape[0])
+        or e >= min(src.shape[0], dst.shape[0], link.shape[0], meas.shape[0], counts.shape[0])
+        or e >= min(behaviour.shape[0], edge_dirty.shape[0], out_next.shape[0])
+        or e >= min(order.shape[0], rsrc.shape[0], rdst.shape[0], rlink.shape[0])
+    ):
+        return GROW, ist[0]
+    ref_n = e  # the order is current: one row a link
     if flags & 1:
         odometry(fs, vtrans, vrot, dt)
     cur = ist[0]
@@ -221,7 +247,7 @@ def frame_step(
             y = pose[cur, 1] + fs[1]
         th = wrap_pi(wrap_pi(fs[2]))
         if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(th)):
-            return FALLBACK
+            return FALLBACK, ist[0]
         if cur >= 0:
             src_id = cur
             new_dst = n
@@ -241,7 +267,7 @@ def frame_step(
         if not (
             math.isfinite(d) and math.isfinite(h) and math.isfinite(f) and math.isfinite(fs[3])
         ):
-            return FALLBACK
+            return FALLBACK, ist[0]
     target = dest
     if kind == CREATE:
         pose[n, 0] = x
@@ -294,11 +320,11 @@ def frame_step(
     nn = n + (out & NODE_ADDED)
     ne = e + (out & LINK_ADDED) // LINK_ADDED
     if not flags & 2 or nn < 2 or ne == 0 or loops == 0:
-        return out
+        return out, ist[0]
     if flags & 4 and out == 0:
-        return out
+        return out, ist[0]
     ran = sweep(pose, rsrc[:ref_n], rdst[:ref_n], rlink[:ref_n], loops, correction)
     out |= RELAXED
     if ran < loops:
         out |= FIXED
-    return out
+    return out, ist[0]

@@ -21,6 +21,7 @@ Example:
 
 from __future__ import annotations
 
+import itertools
 import math
 from typing import TYPE_CHECKING, Any
 
@@ -38,6 +39,9 @@ if TYPE_CHECKING:
     import networkx as nx
 
 __all__ = ["ExperienceGraph"]
+
+_LAYOUTS = itertools.count(1)
+"""Layout stamps, unique in the process (see :attr:`ExperienceGraph.layout`)."""
 
 
 def _grow(a: np.ndarray, need: int, fill: int = 0) -> np.ndarray:
@@ -98,6 +102,9 @@ class ExperienceGraph:
         out_ends, out_next: each experience's out-links (:func:`out_lists`).
         edge_dirty: 1 where a link's graph attributes are stale.
         version: bumped by every change of poses or links.
+        layout: a stamp unique in the process, renewed when an array is replaced (grown,
+            cleared, loaded) or a link is made or changed other than by the compiled
+            frame: what is kept of the arrays (the compiled frame's) is valid while it is.
     """
 
     LINK_FIELDS = ("src", "dst", "link", "meas", "counts", "behaviour", "edge_dirty", "out_next")
@@ -124,6 +131,7 @@ class ExperienceGraph:
         self.out_next = np.zeros(0, dtype=np.int64)
         self.out_ends = np.zeros((0, 2), dtype=np.int64)
         self.version = 0
+        self.layout = next(_LAYOUTS)
         self._mirror = GraphMirror()  # the networkx view, updated when read
         self._links_version = 0  # bumped by every change of the links
         # (links version, the links in OpenRatSLAM's order)
@@ -131,6 +139,11 @@ class ExperienceGraph:
 
     def __len__(self) -> int:
         return self.n
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        # a copy or an unpickled graph has arrays of its own: a layout of its own
+        self.__dict__.update(state)
+        self.layout = next(_LAYOUTS)
 
     @property
     def poses(self) -> np.ndarray:
@@ -209,8 +222,8 @@ class ExperienceGraph:
         return i
 
     def node_added(self, pc: tuple[float, ...], template_id: int, frame: int, t: float) -> None:
-        """Record experience ``n`` (its pose already written): its attributes, the count,
-        and the graph's pending node (it gets the node and its attributes when read)."""
+        """Record experience ``n`` (its pose already written): its attributes and the
+        count (the graph gets the node and its attributes when read)."""
         i = self.n
         self.pc[i] = pc
         self.vt[i] = int(template_id)
@@ -218,31 +231,37 @@ class ExperienceGraph:
         self.t[i] = float(t)
         self.n = i + 1
         self.version += 1
-        self._mirror.dirty_nodes.add(i)
 
     def link_added(self, ref: relaxation.ReferenceOrder) -> None:
         """Record link ``e``, written with its out-list entry and reference-order place by
-        the compiled frame (``ref``, the order it updated): the count, the graph's pending
-        edge, the cached order."""
-        e = self.e
-        self.e = e + 1
+        the compiled frame (``ref``, the order it updated, one row longer): the count and
+        the cached order, still current (the graph gets the edge when read)."""
+        self.e += 1
         self.version += 1
         self._links_version += 1
+        ref.n += 1
         self._ref = (self._links_version, ref)
-        self._mirror.pending_edges.append((int(self.src[e]), int(self.dst[e])))
 
     def reserve(self, nodes: int, links: int) -> None:
         """Make room for ``nodes`` more experiences and ``links`` more links."""
-        need = self.n + nodes
-        if need > len(self.pose):
-            for name in ("pose", "pc", "vt", "frame", "t"):
-                setattr(self, name, _grow(getattr(self, name), need))
-        if need > len(self.out_ends):
-            self.out_ends = _grow(self.out_ends, need, fill=-1)
-        need = self.e + links
-        if need > len(self.src):
-            for name in self.LINK_FIELDS:
-                setattr(self, name, _grow(getattr(self, name), need))
+        n, e = self.n + nodes, self.e + links
+        for names, need, fill in (
+            (("pose", "pc", "vt", "frame", "t"), n, 0),
+            (("out_ends",), n, -1),
+            (self.LINK_FIELDS, e, 0),
+        ):
+            if need > len(getattr(self, names[0])):
+                for name in names:
+                    setattr(self, name, _grow(getattr(self, name), need, fill))
+                self.layout = next(_LAYOUTS)
+
+    def reserve_frame(self) -> None:
+        """Room for one more experience and link, in the links' OpenRatSLAM order too."""
+        self.reserve(1, 1)
+        ref = self._reference()
+        if ref.n == len(ref.buffers[0]):
+            ref.reserve()
+            self.layout = next(_LAYOUTS)
 
     def set_link(self, k: int, d: float, heading: float, facing: float, dt: float) -> None:
         """Write link ``k``'s ``(d, heading, facing, dt)`` and its measurement."""
@@ -251,6 +270,7 @@ class ExperienceGraph:
         self.edge_dirty[k] = 1
         self.version += 1
         self._links_version += 1
+        self.layout = next(_LAYOUTS)  # the cached order is stale, or made current below
 
     def out_links(self, a: int) -> list[int]:
         """Rows of the links leaving ``a``, in creation order (a node's few links)."""
@@ -333,7 +353,6 @@ class ExperienceGraph:
         else:
             self.out_next[ends[src, 1]] = k
         ends[src, 1] = k
-        self._mirror.pending_edges.append((src, dst))  # the graph gets it when read
         # keep the cached reference order current when it was current before the link
         cached = self._ref
         if cached is None or cached[0] != before or cached[1].n != k:
@@ -357,6 +376,7 @@ class ExperienceGraph:
         self._mirror.remove_edge(src, dst)
         self.version += 1
         self._links_version += 1
+        self.layout = next(_LAYOUTS)
         ends, nxt = out_lists(self.src[: self.e], self.n)
         self.out_ends[: self.n] = ends
         self.out_next[: self.e] = nxt
@@ -402,6 +422,7 @@ class ExperienceGraph:
             e = self.e
             ref = relaxation.ReferenceOrder(self.src[:e], self.dst[:e], self.link[:e])
             cached = self._ref = (self._links_version, ref)
+            self.layout = next(_LAYOUTS)
         return cached[1]
 
     def links(self) -> dict[str, np.ndarray]:
@@ -463,4 +484,5 @@ class ExperienceGraph:
         self.counts, self.behaviour = arrays["link_counts"], arrays["link_behaviour"]
         self.edge_dirty = np.zeros(e, dtype=np.uint8)
         self.out_ends, self.out_next = out_lists(self.src, n)
+        self.layout = next(_LAYOUTS)
         self._mirror.load(self)

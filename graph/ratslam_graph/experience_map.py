@@ -130,10 +130,16 @@ class ExperienceMap:
         self._backend = backend
         self.store = ExperienceGraph()
         self._compiled_for: tuple[tuple[int, int], bool] | None = None
+        self._frame_args: frame_step.FrameArgs | None = None  # (frame_step.frame_args)
         self._clear()
 
+    def __getstate__(self) -> dict[str, Any]:
+        # a copy or a pickle has arrays of its own: the compiled frame's are made again
+        return {**self.__dict__, "_frame_args": None}
+
     def _clear(self) -> None:
-        self.store.clear()
+        self.store.clear()  # (a new layout: the compiled frame's arguments are made again)
+        self._frame_args = None
         self._relax_cursor = 0  # exp_relax_budget: the link the next relaxation starts at
         self._fixed_at: tuple | None = None  # (version, params, backend) of a fixed point
         self._fs = np.zeros(5)  # accum_x, accum_y, accum_facing, accum_time, relative_rad

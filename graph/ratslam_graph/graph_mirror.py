@@ -3,7 +3,10 @@
 :class:`~ratslam_graph.experience_graph.ExperienceGraph` keeps experiences and links in
 numpy arrays; :class:`GraphMirror` holds the :class:`networkx.DiGraph` that mirrors them
 and what changed since it was last read (new experiences and links, attributes gone
-stale, poses moved), so a run that never reads the graph never pays for it.
+stale, poses moved), so a run that never reads the graph never pays for it. New
+experiences and links are rows past those it holds (the arrays only grow at the end, and
+a removed link's rows shift after the graph took every link), so nothing is recorded
+when they are made.
 
 Example:
     >>> from ratslam_graph.experience_graph import ExperienceGraph
@@ -83,14 +86,14 @@ def _edge_attrs(s: MirroredArrays, k: int) -> dict[str, Any]:
 class GraphMirror:
     """A :class:`networkx.DiGraph` mirroring an experience graph's arrays, lazily.
 
-    The owner says what changed (:attr:`pending_edges`, :attr:`dirty_nodes`,
-    :attr:`poses_dirty`, and its own ``edge_dirty`` array for link attributes);
+    The owner's rows past :attr:`nodes` and :attr:`edges` are new; it says what else
+    changed (:attr:`poses_dirty`, and its own ``edge_dirty`` array for link attributes);
     :meth:`read` applies it. networkx is imported, and the graph made, when the graph is
     first needed: a run that never reads it never loads networkx.
 
     Attributes:
-        pending_edges: links made since the last read, in order ``(src, dst)``.
-        dirty_nodes: experiences whose attributes are stale.
+        nodes, edges: the experiences and links (rows ``[:nodes]``, ``[:edges]``) the
+            graph holds.
         poses_dirty: every experience's ``x, y, th`` is stale.
     """
 
@@ -100,8 +103,8 @@ class GraphMirror:
     def clear(self) -> None:
         """An empty graph, nothing pending."""
         self._made: nx.DiGraph | None = None
-        self.pending_edges: list[tuple[int, int]] = []
-        self.dirty_nodes: set[int] = set()
+        self.nodes = 0
+        self.edges = 0
         self.poses_dirty = False
 
     @property
@@ -115,12 +118,7 @@ class GraphMirror:
 
     def read(self, s: MirroredArrays) -> nx.DiGraph:
         """The graph, brought up to date with ``s``'s arrays."""
-        self._sync_structure(s.n)
-        if self.dirty_nodes:
-            nodes = self._g.nodes
-            for i in sorted(self.dirty_nodes):
-                nodes[i].update(_node_attrs(s, i))
-            self.dirty_nodes.clear()
+        self._sync_structure(s)
         if s.edge_dirty[: s.e].any():
             self.flush_edges(s)
         if self.poses_dirty:
@@ -133,20 +131,23 @@ class GraphMirror:
             self.poses_dirty = False
         return self._g
 
-    def _sync_structure(self, n: int) -> None:
-        """Add the experiences and links made since the graph was last read (their
-        attributes follow from the dirty sets)."""
+    def _sync_structure(self, s: MirroredArrays) -> None:
+        """Add the experiences (with their attributes) and links (their attributes follow
+        from ``edge_dirty``) made since the graph was last read."""
         g = self._g
-        if len(g) < n:
-            g.add_nodes_from(range(len(g), n))
-        if self.pending_edges:
-            g.add_edges_from(self.pending_edges)
-            self.pending_edges.clear()
+        n, e = s.n, s.e
+        if self.nodes < n:
+            g.add_nodes_from((i, _node_attrs(s, i)) for i in range(self.nodes, n))
+            self.nodes = n
+        if self.edges < e:
+            src, dst = s.src[self.edges : e].tolist(), s.dst[self.edges : e].tolist()
+            g.add_edges_from(zip(src, dst))
+            self.edges = e
 
     def flush_edges(self, s: MirroredArrays) -> None:
         """Add the pending links and refresh every stale link's attributes (before link
         rows shift: the graph then holds every link with its current values)."""
-        self._sync_structure(s.n)
+        self._sync_structure(s)
         dirty = s.edge_dirty[: s.e]
         edges = self._g.edges
         for k in np.flatnonzero(dirty).tolist():
@@ -154,8 +155,10 @@ class GraphMirror:
         dirty[:] = 0
 
     def remove_edge(self, src: int, dst: int) -> None:
-        """Drop the link ``src -> dst`` (call :meth:`flush_edges` first)."""
+        """Drop the link ``src -> dst`` (call :meth:`flush_edges` first; the owner's later
+        link rows shift down one)."""
         self._g.remove_edge(int(src), int(dst))
+        self.edges -= 1
 
     def load(self, s: MirroredArrays) -> None:
         """The whole graph of ``s``, built at once (after a load)."""
@@ -163,3 +166,4 @@ class GraphMirror:
         self._g.add_nodes_from((i, _node_attrs(s, i)) for i in range(s.n))
         src, dst = s.src[: s.e].tolist(), s.dst[: s.e].tolist()
         self._g.add_edges_from((src[k], dst[k], _edge_attrs(s, k)) for k in range(s.e))
+        self.nodes, self.edges = s.n, s.e

@@ -7,6 +7,7 @@ Every test drives two maps with the same random frames: one through
 
 from __future__ import annotations
 
+import copy
 import math
 
 import numpy as np
@@ -94,6 +95,46 @@ def test_compiled_frame_is_the_python_path_bit_for_bit(seed, kw):
             assert_bit_equal(fast, slow)
     assert fast.num_links > 20 and len(fast) > 20
     assert_bit_equal(fast, slow)
+
+
+def test_the_kept_arguments_follow_the_maps_arrays():
+    """The compiled frame's arguments, kept on the map, are made again whenever its
+    arrays are replaced or its links change other than by the compiled frame: a copy
+    (each map writes its own arrays), a link removed or added by hand, a state loaded,
+    new settings."""
+    fast, slow = ExperienceMap(), ExperienceMap()
+    copies: list[ExperienceMap] = []
+    for k, f in enumerate(frames(11, 240)):
+        if k == 60:
+            copies.append(copy.deepcopy(fast))
+        maps = [fast, slow, *copies]
+        if k == 100:
+            src, dst = int(slow.store.src[3]), int(slow.store.dst[3])
+            for em in maps:
+                em.store.remove_link(src, dst)
+        if k == 140:
+            for em in maps:
+                em.set_state(em.get_state())
+        if k == 180:
+            a, b = next(
+                (a, b)
+                for a in range(len(slow))
+                for b in range(a + 1, len(slow))
+                if slow.store.link_index(a, b) < 0
+            )
+            for em in maps:
+                assert em.store.add_link(a, b, 1.0, 0.1, 0.2, 3.0)
+        if k == 200:
+            params = ExperienceMapParams(exp_loops=3, exp_correction=0.7)
+            for em in maps:
+                em.params = params
+        compiled(fast, *f)
+        python_path(slow, *f)
+        for em in copies:
+            compiled(em, *f)
+    assert fast.num_links > 20 and len(fast) > 20
+    assert_bit_equal(fast, slow)
+    assert_bit_equal(copies[0], slow)
 
 
 def test_other_settings_take_the_python_path_and_give_its_map():

@@ -1,15 +1,17 @@
 """The pipeline's experience-map stage: a frame's odometry, action and relaxation.
 
 :func:`experience_map_step` is what :class:`~torchratslam.pipeline.RatSLAM` does with the
-experience map each frame: one compiled call (``step_frame``) where the module has it and
-the pose cells' action stands, else odometry, the action (the experience map's own
-under ``exp_create_rule="activity"``, Eqs. 1-4) and the relaxation, one by one. An
-:class:`~ratslam_graph.experience_map.ExperienceMap` that keeps the class's own frame
-takes a frame without action or relaxation (about half of OpenRatSLAM's frames) as its
-odometry alone (one compiled call, ``ratslam_graph._frame_step.odometry``), and a frame
-with an action as the compiled frame
-(:func:`ratslam_graph.frame_step.step_frame`) without the layers between: what its
-``step_frame`` would do.
+experience map each frame: one compiled call (:func:`compiled_step`) where the map has it
+and the pose cells' action stands, else (:func:`general_step`) odometry, the action (the
+experience map's own under ``exp_create_rule="activity"``, Eqs. 1-4) and the relaxation,
+one by one. :func:`compiled_step` is an
+:class:`~ratslam_graph.experience_map.ExperienceMap`'s own frame, what its ``step_frame``
+would do, without the layers between: a frame without action or relaxation (about half
+of OpenRatSLAM's frames) as its odometry alone
+(:func:`ratslam_graph.frame_step.odometry_frame`, one compiled call), a frame with an
+action as the compiled frame (:func:`ratslam_graph.frame_step.stage_frame`, with the
+arguments the map keeps for it). The pipeline's stage does what
+:func:`experience_map_step` does, with :func:`compiled_step`'s two calls inline.
 """
 
 from __future__ import annotations
@@ -18,28 +20,44 @@ from typing import Any
 
 from ratslam_graph import frame_step
 from ratslam_graph.experience_map import ExperienceMap
-from ratslam_graph.frame_step import compiled_frame
 from ratslam_graph.messages import Action, ActionKind
 from torchratslam.protocols import ExperienceMapModule
 
-__all__ = ["experience_map_step"]
+__all__ = ["compiled_step", "experience_map_step", "general_step"]
 
 
-def _plan(em: ExperienceMapModule) -> tuple[Any, Any, bool, bool, bool]:
-    """``(params, backend, compiled, relax every frame, activity rule)`` of ``em``: whether
-    the class's own compiled frame takes its frames (see the module's text); kept on an
+def compiled_step(
+    em: ExperienceMapModule,
+    odo: tuple[float, float, float] | None,
+    action: Action,
+    frame: int,
+    t: float,
+    pc: tuple[float, float, float],
+    template_id: int,
+    behaviour: int | None,
+) -> int | None:
+    """The frame as the map's own compiled frame
+    (:func:`ratslam_graph.frame_step.stage_frame`), when the map is an
+    :class:`~ratslam_graph.experience_map.ExperienceMap` that has one the pipeline may
+    take without its ``step_frame`` and the action is one it takes; returns the current
+    experience, or None, nothing done: the caller takes the frame the general way
+    (:func:`general_step`). Arguments as :func:`experience_map_step`'s (``t`` and
+    ``template_id`` as given, converted when an experience is made)."""
+    if not isinstance(em, ExperienceMap):
+        return None
+    if action.kind or odo is None:
+        return frame_step.stage_frame(em, odo, action, frame, t, pc, template_id, behaviour)
+    return frame_step.odometry_frame(em, odo, action)
+
+
+def _plan(em: ExperienceMapModule) -> tuple[Any, bool, bool]:
+    """``(params, relax every frame, activity rule)`` of ``em``, kept on an
     :class:`~ratslam_graph.experience_map.ExperienceMap` for as long as its ``params``
-    and backend are the same objects."""
+    are the same object."""
     params = getattr(em, "params", None)
     relax_every = getattr(params, "exp_relax", "every_frame") == "every_frame"
     activity = getattr(params, "exp_create_rule", "pc_distance") == "activity"
-    compiled = (
-        not activity
-        and isinstance(em, ExperienceMap)
-        and type(em).step_frame is ExperienceMap.step_frame
-        and compiled_frame(em)
-    )
-    plan = (params, getattr(em, "_backend", None), compiled, relax_every, activity)
+    plan = (params, relax_every, activity)
     if isinstance(em, ExperienceMap):
         em.__dict__["_stage_plan"] = plan
     return plan
@@ -71,27 +89,41 @@ def experience_map_step(
             distances round the wrapping network.
         behaviour: the transition's movement label (Eq. 9), or None.
     """
+    current = compiled_step(em, odo, action, frame, t, pc, template_id, behaviour)
+    if current is not None:
+        return current
+    return general_step(
+        em,
+        odo,
+        action,
+        frame=frame,
+        t=t,
+        pc=pc,
+        template_id=template_id,
+        pc_dims=pc_dims,
+        behaviour=behaviour,
+    )
+
+
+def general_step(
+    em: ExperienceMapModule,
+    odo: tuple[float, float, float] | None,
+    action: Action,
+    *,
+    frame: int,
+    t: float,
+    pc: tuple[float, float, float],
+    template_id: int,
+    pc_dims: tuple[float, ...],
+    behaviour: int | None = None,
+) -> int:
+    """:func:`experience_map_step` without :func:`compiled_step` (which did not take the
+    frame): the map's ``step_frame``, or its calls one by one."""
     plan = em.__dict__.get("_stage_plan") if isinstance(em, ExperienceMap) else None
-    if plan is None or plan[0] is not em.params or plan[1] is not em._backend:  # type: ignore[attr-defined]
+    if plan is None or plan[0] is not em.params:  # type: ignore[attr-defined]
         plan = _plan(em)
-    compiled, relax_every, activity = plan[2], plan[3], plan[4]
+    relax_every, activity = plan[1], plan[2]
     relax = relax_every or action.kind != ActionKind.NONE
-    if compiled and isinstance(em, ExperienceMap):  # the class's step_frame, without layers
-        if not relax and odo is not None:  # no action, no relaxation: the odometry alone
-            (frame_step._KERNEL or frame_step._kernel()).odometry(em._fs, *odo)
-            return em._ist.item(0)  # current_id
-        if frame_step.step_frame(
-            em,
-            odo,
-            action,
-            frame=frame,
-            t=t,
-            pc=pc,
-            template_id=template_id,
-            behaviour=0 if behaviour is None else int(behaviour),
-            relax=relax,
-        ):
-            return em._ist.item(0)
     extra = {} if behaviour is None else {"behaviour": int(behaviour)}
     step = getattr(em, "step_frame", None)
     if step is not None and not activity:  # one call: odometry, action, relaxation

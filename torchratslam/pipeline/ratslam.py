@@ -18,12 +18,14 @@ import numpy as np
 import torch
 
 import torchratslam.pipeline.defaults  # noqa: F401  (registers the default stages)
+from ratslam_graph.experience_map import ExperienceMap
+from ratslam_graph.frame_step import odometry_frame, stage_frame
 from ratslam_graph.messages import Action, ActionKind
 from torchratslam.config import RatSLAMConfig
 from torchratslam.errors import InputError
 from torchratslam.messages import Frame, SessionState, ViewMatch
 from torchratslam.pipeline.checks import as_config, check_device, check_odometry_step
-from torchratslam.pipeline.em_stage import experience_map_step
+from torchratslam.pipeline.em_stage import general_step
 from torchratslam.pipeline.history import History
 from torchratslam.pipeline.results import RunResult, StepResult
 from torchratslam.pipeline.runner import RunProgress, open_frames, parked_gc
@@ -242,9 +244,20 @@ class RatSLAM:
         behaviour: int | None = None,
     ) -> int:
         with self.timings.section("experience_map"):
-            return experience_map_step(
-                self.experience_map,
-                None if self._skips_odometry(index) else odo,
+            # experience_map_step: its compiled_step without a layer, the rest worked out
+            # only where it is needed
+            em = self.experience_map
+            if index and isinstance(em, ExperienceMap):
+                current = (
+                    stage_frame(em, odo, action, index, frame.t, pc, view.template_id, behaviour)
+                    if action.kind
+                    else odometry_frame(em, odo, action)
+                )
+                if current is not None:
+                    return current
+            return general_step(
+                em,
+                odo if index or not self._skips_odometry(index) else None,
                 action,
                 frame=index,
                 t=float(frame.t),
